@@ -1,0 +1,130 @@
+"""The streamer interface every transport (LSL, ROS 2, CSV, ...) implements."""
+
+from __future__ import annotations
+
+import abc
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hri_physio_bridge.frames import Frame, default_channel_names
+
+
+class StreamerError(RuntimeError):
+    """A streamer could not do what was asked; the message says why."""
+
+
+class StreamNotFoundError(StreamerError):
+    """The input stream did not appear within the timeout."""
+
+
+class StreamLostError(StreamerError):
+    """A connected input went away (it may come back: reopen to wait for it)."""
+
+
+class StreamMismatchError(StreamerError):
+    """The stream's shape or type does not match the configuration."""
+
+
+# Channel formats the seed supports, by canonical name, with their aliases.
+_DTYPES: dict[str, tuple[str, np.dtype | None]] = {
+    "float64": ("float64", np.dtype(np.float64)),
+    "float32": ("float32", np.dtype(np.float32)),
+    "int64": ("int64", np.dtype(np.int64)),
+    "int32": ("int32", np.dtype(np.int32)),
+    "int16": ("int16", np.dtype(np.int16)),
+    "int8": ("int8", np.dtype(np.int8)),
+    "string": ("string", None),
+}
+_ALIASES = {
+    "double": "float64", "double64": "float64", "float": "float32", "long": "int64",
+    "longlong": "int64", "int": "int32", "short": "int16", "char": "int8", "str": "string",
+}
+
+
+def canonical_dtype(name: str) -> str:
+    """Canonical channel-format name for ``name`` (e.g. 'double' -> 'float64')."""
+    key = str(name).strip().lower()
+    key = _ALIASES.get(key, key)
+    if key not in _DTYPES:
+        known = ", ".join([*_DTYPES, *_ALIASES])
+        raise ValueError(f"unknown dtype {name!r}; supported: {known}")
+    return key
+
+
+def numpy_dtype(name: str) -> np.dtype:
+    """numpy dtype used to hold samples of this channel format."""
+    key = canonical_dtype(name)
+    dt = _DTYPES[key][1]
+    return dt if dt is not None else np.dtype(object)
+
+
+@dataclass
+class StreamSpec:
+    """What an output declares (and an input is checked against)."""
+
+    name: str
+    type: str = "Physio"
+    channel_count: int = 1
+    nominal_rate: float = 0.0
+    dtype: str = "float64"
+    source_id: str = ""
+    channels: tuple[str, ...] = field(default=())
+
+    def __post_init__(self) -> None:
+        self.dtype = canonical_dtype(self.dtype)
+        if self.channel_count < 1:
+            raise ValueError(f"channel_count must be >= 1, got {self.channel_count}")
+        if self.nominal_rate < 0:
+            raise ValueError(f"nominal_rate must be >= 0 (0 = irregular), got {self.nominal_rate}")
+        if not self.channels:
+            self.channels = default_channel_names(self.channel_count)
+        self.channels = tuple(self.channels)
+        if len(self.channels) != self.channel_count:
+            raise ValueError(
+                f"{len(self.channels)} channel names given for {self.channel_count} channels"
+            )
+
+    @property
+    def is_string(self) -> bool:
+        return self.dtype == "string"
+
+
+class Streamer(abc.ABC):
+    """One end of a data path. Open it as an input or an output, not both."""
+
+    #: URI scheme this streamer serves, e.g. "lsl".
+    scheme: str = ""
+
+    def __init__(self, address: str) -> None:
+        self.address = address
+        self.spec: StreamSpec | None = None
+
+    @property
+    def uri(self) -> str:
+        return f"{self.scheme}:{self.address}"
+
+    @abc.abstractmethod
+    def open_input(self, expected: StreamSpec | None = None, timeout: float = 10.0) -> StreamSpec:
+        """Connect to the source; return what it is. Raise StreamNotFoundError/StreamMismatchError."""
+
+    @abc.abstractmethod
+    def open_output(self, spec: StreamSpec) -> None:
+        """Create the sink declaring ``spec``."""
+
+    @abc.abstractmethod
+    def receive(self, timeout: float = 0.1) -> Frame | None:
+        """Next chunk of samples (any size), or None when nothing arrived in ``timeout``.
+
+        Raises StreamLostError when the source has gone away.
+        """
+
+    @abc.abstractmethod
+    def publish(self, frame: Frame) -> None:
+        """Send a frame of samples."""
+
+    def close(self) -> None:  # noqa: B027 - optional hook, most streamers need it
+        """Release the transport (idempotent)."""
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.uri!r})"

@@ -1,0 +1,225 @@
+"""CSV streamer: logs as outputs, log replay as inputs.
+
+File layout: one header row ``t,<ch1>,<ch2>...`` then one row per sample, the
+source timestamp first. Floats are written with 17 significant digits so a
+float64 survives the round trip exactly.
+
+Address: ``<path>[?rate=<x>&dtype=<name>]``. As an input, ``rate`` paces the
+replay by the recorded timestamps: 1 = real time (default), 20 = twenty times
+faster, 0 = as fast as possible (order kept).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+import time
+from collections.abc import Callable
+from pathlib import Path
+from urllib.parse import parse_qs
+
+import numpy as np
+
+from hri_physio_bridge.frames import TIME_LABEL, Frame
+from hri_physio_bridge.streamers.base import (
+    StreamerError,
+    StreamMismatchError,
+    StreamNotFoundError,
+    Streamer,
+    StreamSpec,
+    numpy_dtype,
+)
+
+_QUERY_KEYS = {"rate", "dtype"}
+
+
+def parse_csv_address(address: str) -> tuple[Path, dict[str, str]]:
+    path, _, query = address.partition("?")
+    if not path:
+        raise ValueError(f"CSV address {address!r} has no file path")
+    params = {k: v[-1] for k, v in parse_qs(query, keep_blank_values=True).items()}
+    unknown = set(params) - _QUERY_KEYS
+    if unknown:
+        raise ValueError(
+            f"unknown CSV option(s) {sorted(unknown)} in {address!r}; known: {sorted(_QUERY_KEYS)}"
+        )
+    return Path(path).expanduser(), params
+
+
+class CsvWriter:
+    """Append frames to a CSV file, flushed after every write.
+
+    Refuses to overwrite an existing file: a lost log is a lost participant.
+    """
+
+    def __init__(self, path: str | os.PathLike, channels: tuple[str, ...], dtype: str = "float64") -> None:
+        self.path = Path(path)
+        if self.path.exists():
+            raise StreamerError(f"refusing to overwrite existing file {self.path}")
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._file: io.TextIOWrapper | None = open(self.path, "x", newline="", encoding="utf-8")  # noqa: SIM115
+        self._writer = csv.writer(self._file)
+        self._writer.writerow([TIME_LABEL, *channels])
+        self._file.flush()
+        self.num_channels = len(channels)
+        self._numeric = dtype != "string"
+        self.rows_written = 0
+
+    def write(self, frame: Frame) -> None:
+        if self._file is None:
+            raise StreamerError(f"log {self.path} is closed")
+        if frame.num_channels != self.num_channels:
+            raise StreamMismatchError(
+                f"frame has {frame.num_channels} channels, log {self.path} has {self.num_channels}"
+            )
+        if self._numeric:
+            value_fmt = "%d" if frame.values.dtype.kind in "iu" else "%.17g"
+            table = np.column_stack([frame.timestamps, frame.values.astype(np.float64)])
+            fmt = ",".join(["%.17g"] + [value_fmt] * self.num_channels)
+            np.savetxt(self._file, table, fmt=fmt, delimiter=",")
+        else:
+            for t, row in zip(frame.timestamps, frame.values, strict=True):
+                self._writer.writerow(["%.17g" % t, *[str(v) for v in row]])
+        self._file.flush()
+        self.rows_written += frame.num_samples
+
+    def close(self) -> None:
+        if self._file is not None:
+            self._file.flush()
+            os.fsync(self._file.fileno())
+            self._file.close()
+            self._file = None
+
+
+class CsvStreamer(Streamer):
+    scheme = "csv"
+
+    def __init__(
+        self,
+        address: str,
+        max_chunk: int = 1024,
+        monotonic: Callable[[], float] = time.monotonic,
+        sleep: Callable[[float], None] = time.sleep,
+    ) -> None:
+        super().__init__(address)
+        self.path, self.params = parse_csv_address(address)
+        try:
+            self.rate = float(self.params.get("rate", "1"))
+        except ValueError:
+            raise ValueError(f"CSV rate must be a number, got {self.params['rate']!r}") from None
+        if self.rate < 0 or not math.isfinite(self.rate):
+            raise ValueError(f"CSV rate must be >= 0 (0 = as fast as possible), got {self.rate}")
+        self.max_chunk = int(max_chunk)
+        self._monotonic = monotonic
+        self._sleep = sleep
+        self._reader = None
+        self._file: io.TextIOWrapper | None = None
+        self._writer: CsvWriter | None = None
+        self._t0: tuple[float, float] | None = None  # (first source t, wall start)
+        self._line = 1
+        self.exhausted = False
+
+    # -- input ---------------------------------------------------------------
+    def open_input(self, expected: StreamSpec | None = None, timeout: float = 10.0) -> StreamSpec:
+        self.close()
+        if not self.path.is_file():
+            raise StreamNotFoundError(f"CSV file {self.path} does not exist")
+        self._file = open(self.path, newline="", encoding="utf-8")  # noqa: SIM115
+        self._reader = csv.reader(self._file)
+        header = next(self._reader, None)
+        if not header or header[0].strip() != TIME_LABEL:
+            self.close()
+            raise StreamMismatchError(
+                f"{self.path}: first row must be a header starting with '{TIME_LABEL}', got {header}"
+            )
+        channels = tuple(h.strip() for h in header[1:])
+        if not channels:
+            self.close()
+            raise StreamMismatchError(f"{self.path}: header has no data columns")
+        dtype = self.params.get("dtype") or (expected.dtype if expected else "float64")
+        spec = StreamSpec(
+            name=self.path.stem,
+            type=expected.type if expected else "Physio",
+            channel_count=len(channels),
+            nominal_rate=expected.nominal_rate if expected else 0.0,
+            dtype=dtype,
+            channels=channels,
+        )
+        if expected is not None and expected.channel_count != spec.channel_count:
+            self.close()
+            raise StreamMismatchError(
+                f"{self.path} has {spec.channel_count} data column(s) but num_channels is "
+                f"{expected.channel_count}"
+            )
+        self.spec = spec
+        self._np_dtype = numpy_dtype(dtype)
+        self.exhausted = False
+        self._t0 = None
+        self._line = 1
+        return spec
+
+    def receive(self, timeout: float = 0.1) -> Frame | None:
+        if self._reader is None or self.spec is None:
+            raise StreamerError(f"{self.uri} is not open as an input")
+        rows: list[list[str]] = []
+        for row in self._reader:
+            self._line += 1
+            if not row:
+                continue
+            if len(row) != self.spec.channel_count + 1:
+                raise StreamMismatchError(
+                    f"{self.path}:{self._line}: expected {self.spec.channel_count + 1} columns, "
+                    f"got {len(row)}"
+                )
+            rows.append(row)
+            if len(rows) >= self.max_chunk:
+                break
+        if not rows:
+            self.exhausted = True
+            return None
+        try:
+            stamps = np.array([float(r[0]) for r in rows])
+            if self.spec.is_string:
+                values = np.array([r[1:] for r in rows], dtype=object)
+            else:
+                values = np.array([[float(v) for v in r[1:]] for r in rows]).astype(self._np_dtype)
+        except ValueError as exc:
+            raise StreamMismatchError(
+                f"{self.path} near line {self._line}: not a number ({exc})"
+            ) from exc
+        self._pace(stamps[-1], timeout)
+        return Frame(stamps, values, self.spec.channels)
+
+    def _pace(self, t_source: float, timeout: float) -> None:
+        """Hold the chunk back until its last sample is due at the replay rate."""
+        if self.rate == 0:
+            return
+        now = self._monotonic()
+        if self._t0 is None:
+            self._t0 = (t_source, now)
+            return
+        due = self._t0[1] + (t_source - self._t0[0]) / self.rate
+        if due > now:
+            self._sleep(due - now)
+
+    # -- output --------------------------------------------------------------
+    def open_output(self, spec: StreamSpec) -> None:
+        self.close()
+        self._writer = CsvWriter(self.path, spec.channels, spec.dtype)
+        self.spec = spec
+
+    def publish(self, frame: Frame) -> None:
+        if self._writer is None:
+            raise StreamerError(f"{self.uri} is not open as an output")
+        self._writer.write(frame)
+
+    def close(self) -> None:
+        if self._writer is not None:
+            self._writer.close()
+            self._writer = None
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+            self._reader = None

@@ -1,0 +1,228 @@
+"""Lab Streaming Layer streamer (pylsl).
+
+Address: ``<stream name>[?type=<type>&source_id=<id>&sync=1]``, e.g.
+``lsl:PolarH10/1234/ECG`` or ``lsl:PolarH10/1234/ECG?type=ECG``. As an input the
+stream is resolved by name (and type / source id when given); ``sync=1`` turns
+on liblsl clock synchronisation for streams coming from another machine (off by
+default: on one machine the sender's timestamps are already on our clock, and
+we keep them unchanged).
+"""
+
+from __future__ import annotations
+
+from urllib.parse import parse_qs
+
+import numpy as np
+import pylsl
+
+from hri_physio_bridge.frames import Frame
+from hri_physio_bridge.streamers.base import (
+    StreamerError,
+    StreamLostError,
+    StreamMismatchError,
+    StreamNotFoundError,
+    Streamer,
+    StreamSpec,
+    canonical_dtype,
+    numpy_dtype,
+)
+
+_TO_LSL = {
+    "float64": pylsl.cf_double64,
+    "float32": pylsl.cf_float32,
+    "int64": pylsl.cf_int64,
+    "int32": pylsl.cf_int32,
+    "int16": pylsl.cf_int16,
+    "int8": pylsl.cf_int8,
+    "string": pylsl.cf_string,
+}
+_FROM_LSL = {v: k for k, v in _TO_LSL.items()}
+_QUERY_KEYS = {"type", "source_id", "sync"}
+
+
+def parse_lsl_address(address: str) -> tuple[str, dict[str, str]]:
+    name, _, query = address.partition("?")
+    if not name:
+        raise ValueError(f"LSL address {address!r} has no stream name")
+    params = {k: v[-1] for k, v in parse_qs(query, keep_blank_values=True).items()}
+    unknown = set(params) - _QUERY_KEYS
+    if unknown:
+        raise ValueError(
+            f"unknown LSL option(s) {sorted(unknown)} in {address!r}; known: {sorted(_QUERY_KEYS)}"
+        )
+    return name, params
+
+
+def describe_stream(info: pylsl.StreamInfo) -> str:
+    return (
+        f"{info.name()} (type={info.type()}, channels={info.channel_count()}, "
+        f"rate={info.nominal_srate():g}, format={_FROM_LSL.get(info.channel_format(), '?')}, "
+        f"source_id={info.source_id() or '-'})"
+    )
+
+
+def _spec_from_info(info: pylsl.StreamInfo) -> StreamSpec:
+    labels: list[str] = []
+    ch = info.desc().child("channels").child("channel")
+    while not ch.empty() and len(labels) < info.channel_count():
+        labels.append(ch.child_value("label"))
+        ch = ch.next_sibling()
+    if len(labels) != info.channel_count() or not all(labels):
+        labels = []
+    return StreamSpec(
+        name=info.name(),
+        type=info.type(),
+        channel_count=info.channel_count(),
+        nominal_rate=info.nominal_srate(),
+        dtype=_FROM_LSL.get(info.channel_format(), "float64"),
+        source_id=info.source_id(),
+        channels=tuple(labels),
+    )
+
+
+class LslStreamer(Streamer):
+    scheme = "lsl"
+
+    def __init__(self, address: str, max_chunk: int = 1024, max_buflen: int = 360) -> None:
+        super().__init__(address)
+        self.name, self.params = parse_lsl_address(address)
+        if max_chunk < 1:
+            raise ValueError(f"max_chunk must be >= 1, got {max_chunk}")
+        self.max_chunk = int(max_chunk)
+        self.max_buflen = int(max_buflen)
+        self._inlet: pylsl.StreamInlet | None = None
+        self._outlet: pylsl.StreamOutlet | None = None
+        self._dtype: np.dtype | None = None
+
+    # -- input ---------------------------------------------------------------
+    def _predicate(self) -> str:
+        def quote(v: str) -> str:
+            return "'" + v.replace("'", "") + "'"
+
+        parts = [f"name={quote(self.name)}"]
+        if self.params.get("type"):
+            parts.append(f"type={quote(self.params['type'])}")
+        if self.params.get("source_id"):
+            parts.append(f"source_id={quote(self.params['source_id'])}")
+        return " and ".join(parts)
+
+    def open_input(self, expected: StreamSpec | None = None, timeout: float = 10.0) -> StreamSpec:
+        self.close()
+        infos = pylsl.resolve_bypred(self._predicate(), 1, timeout)
+        if not infos:
+            seen = pylsl.resolve_streams(wait_time=min(1.0, max(timeout, 0.2)))
+            listing = "; ".join(describe_stream(i) for i in seen) or "none"
+            raise StreamNotFoundError(
+                f"LSL stream {self._predicate()} did not appear within {timeout:g} s. "
+                f"Streams seen: {listing}"
+            )
+        info = infos[0]
+        spec = _spec_from_info(info)
+        if expected is not None:
+            check_matches(spec, expected, self.uri)
+        flags = pylsl.proc_clocksync if self.params.get("sync") in ("1", "true", "yes") else 0
+        self._inlet = pylsl.StreamInlet(
+            info, max_buflen=self.max_buflen, recover=False, processing_flags=flags
+        )
+        try:
+            self._inlet.open_stream(timeout=max(timeout, 1.0))
+        except Exception as exc:  # pylsl raises TimeoutError / LostError
+            self.close()
+            raise StreamLostError(f"could not open LSL stream {spec.name}: {exc}") from exc
+        self.spec = spec
+        self._dtype = numpy_dtype(spec.dtype)
+        return spec
+
+    def receive(self, timeout: float = 0.1) -> Frame | None:
+        if self._inlet is None or self.spec is None:
+            raise StreamerError(f"{self.uri} is not open as an input")
+        try:
+            samples, stamps = self._inlet.pull_chunk(
+                timeout=timeout, max_samples=self.max_chunk, min_samples=1, as_numpy=True
+            )
+        except pylsl.util.LostError as exc:
+            raise StreamLostError(f"LSL stream {self.name} was lost") from exc
+        if stamps is None or len(stamps) == 0:
+            return None
+        if self.spec.is_string:
+            values = np.array(
+                [[v.decode("utf-8", "replace") if isinstance(v, bytes) else str(v) for v in row]
+                 for row in samples],
+                dtype=object,
+            )
+        else:
+            values = np.asarray(samples, dtype=self._dtype)
+        return Frame(np.asarray(stamps, dtype=np.float64), values, self.spec.channels)
+
+    # -- output --------------------------------------------------------------
+    def open_output(self, spec: StreamSpec) -> None:
+        self.close()
+        info = pylsl.StreamInfo(
+            name=self.name,
+            type=self.params.get("type") or spec.type,
+            channel_count=spec.channel_count,
+            nominal_srate=spec.nominal_rate,
+            channel_format=_TO_LSL[spec.dtype],
+            source_id=self.params.get("source_id") or spec.source_id,
+        )
+        chans = info.desc().append_child("channels")
+        for label in spec.channels:
+            chans.append_child("channel").append_child_value("label", label)
+        self._outlet = pylsl.StreamOutlet(info, chunk_size=0, max_buffered=self.max_buflen)
+        self.spec = spec
+        self._dtype = numpy_dtype(spec.dtype)
+
+    def publish(self, frame: Frame) -> None:
+        if self._outlet is None or self.spec is None:
+            raise StreamerError(f"{self.uri} is not open as an output")
+        if frame.num_channels != self.spec.channel_count:
+            raise StreamMismatchError(
+                f"frame has {frame.num_channels} channels, LSL output {self.name} declares "
+                f"{self.spec.channel_count}"
+            )
+        if frame.num_samples == 0:
+            return
+        if self.spec.is_string:
+            data = [[str(v) for v in row] for row in frame.values]
+        else:
+            data = np.ascontiguousarray(cast_for_output(frame.values, self._dtype, self.uri))
+        self._outlet.push_chunk(data, timestamp=frame.timestamps.tolist())
+
+    @property
+    def have_consumers(self) -> bool:
+        return bool(self._outlet is not None and self._outlet.have_consumers())
+
+    def close(self) -> None:
+        if self._inlet is not None:
+            try:
+                self._inlet.close_stream()
+            finally:
+                self._inlet = None
+        self._outlet = None  # liblsl destroys the outlet with the object
+
+
+def check_matches(actual: StreamSpec, expected: StreamSpec, where: str) -> None:
+    """Raise StreamMismatchError when a stream differs from the configuration."""
+    problems = []
+    if actual.channel_count != expected.channel_count:
+        problems.append(
+            f"it has {actual.channel_count} channel(s) but num_channels is {expected.channel_count}"
+        )
+    if canonical_dtype(actual.dtype) != canonical_dtype(expected.dtype):
+        problems.append(f"its format is {actual.dtype} but dtype is {expected.dtype}")
+    if problems:
+        raise StreamMismatchError(f"{where}: " + "; ".join(problems))
+
+
+def cast_for_output(values: np.ndarray, dtype: np.dtype, where: str) -> np.ndarray:
+    """Cast to an integer/float output format, refusing values it cannot hold."""
+    if dtype.kind == "i":
+        if not np.all(np.isfinite(values)):
+            raise StreamMismatchError(f"{where}: NaN/inf cannot be sent on an integer ({dtype}) stream")
+        info = np.iinfo(dtype)
+        if values.size and (values.min() < info.min or values.max() > info.max):
+            raise StreamMismatchError(
+                f"{where}: values outside [{info.min}, {info.max}] cannot be sent as {dtype}"
+            )
+        return np.rint(values).astype(dtype)
+    return values.astype(dtype, copy=False)

@@ -1,0 +1,145 @@
+"""ROS 2 topic streamer: frames as Float64MultiArray, markers as JSON String.
+
+Address: the topic name, e.g. ``ros:/physio/polar_h10/ecg``. The streamer
+needs an rclpy node (the caller owns it and spins it); subscriptions and
+publishers are reliable with a deep queue so bursts are not dropped.
+"""
+
+from __future__ import annotations
+
+import queue
+from collections.abc import Callable
+
+import numpy as np
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Float64MultiArray, String
+
+from hri_physio_bridge.frames import (
+    Frame,
+    FrameFormatError,
+    frame_to_msg,
+    msg_to_frame,
+    msg_to_marker,
+    string_frame_to_msgs,
+)
+from hri_physio_bridge.streamers.base import (
+    StreamerError,
+    StreamMismatchError,
+    Streamer,
+    StreamSpec,
+    numpy_dtype,
+)
+
+
+def frame_qos(depth: int = 1000) -> QoSProfile:
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=ReliabilityPolicy.RELIABLE
+    )
+
+
+class RosStreamer(Streamer):
+    scheme = "ros"
+
+    def __init__(
+        self,
+        address: str,
+        node: Node | None,
+        depth: int = 1000,
+        on_bad_message: Callable[[str], None] | None = None,
+    ) -> None:
+        super().__init__(address)
+        if node is None:
+            raise StreamerError(f"ros:{address} needs a ROS 2 node (none was given)")
+        if not address.startswith("/"):
+            raise ValueError(f"ROS topic must be absolute (start with '/'), got {address!r}")
+        self.node = node
+        self.topic = address
+        self.depth = depth
+        self._queue: queue.Queue[Frame] = queue.Queue()
+        self._sub = None
+        self._pub = None
+        self._expected: StreamSpec | None = None
+        self._on_bad = on_bad_message or (lambda text: node.get_logger().error(text))
+        self.bad_messages = 0
+
+    # -- input ---------------------------------------------------------------
+    def open_input(self, expected: StreamSpec | None = None, timeout: float = 10.0) -> StreamSpec:
+        self.close()
+        spec = expected or StreamSpec(name=self.topic)
+        self._expected = spec
+        self._np_dtype = numpy_dtype(spec.dtype)
+        if spec.is_string:
+            self._sub = self.node.create_subscription(String, self.topic, self._on_marker, frame_qos(self.depth))
+        else:
+            self._sub = self.node.create_subscription(
+                Float64MultiArray, self.topic, self._on_frame, frame_qos(self.depth)
+            )
+        self.spec = spec
+        return spec
+
+    def _reject(self, why: str) -> None:
+        self.bad_messages += 1
+        self._on_bad(f"{self.topic}: message rejected ({self.bad_messages} so far): {why}")
+
+    def _on_frame(self, msg: Float64MultiArray) -> None:
+        try:
+            frame = msg_to_frame(msg)
+        except FrameFormatError as exc:
+            self._reject(str(exc))
+            return
+        spec = self._expected
+        if spec is not None and frame.num_channels != spec.channel_count:
+            self._reject(f"frame has {frame.num_channels} channel(s), num_channels is {spec.channel_count}")
+            return
+        if self._np_dtype.kind == "i":
+            values = frame.values
+            if not np.all(np.isfinite(values)) or np.any(values != np.rint(values)):
+                self._reject(f"non-integer values on a {spec.dtype} stream")
+                return
+            frame = Frame(frame.timestamps, values.astype(self._np_dtype), frame.channels)
+        self._queue.put(frame)
+
+    def _on_marker(self, msg: String) -> None:
+        try:
+            t, data = msg_to_marker(msg)
+        except FrameFormatError as exc:
+            self._reject(str(exc))
+            return
+        self._queue.put(Frame(np.array([t]), np.array([[data]], dtype=object), self.spec.channels))
+
+    def receive(self, timeout: float = 0.1) -> Frame | None:
+        if self._sub is None:
+            raise StreamerError(f"{self.uri} is not open as an input")
+        try:
+            return self._queue.get(timeout=timeout)
+        except queue.Empty:
+            return None
+
+    # -- output --------------------------------------------------------------
+    def open_output(self, spec: StreamSpec) -> None:
+        self.close()
+        msg_type = String if spec.is_string else Float64MultiArray
+        self._pub = self.node.create_publisher(msg_type, self.topic, frame_qos(self.depth))
+        self.spec = spec
+
+    def publish(self, frame: Frame) -> None:
+        if self._pub is None or self.spec is None:
+            raise StreamerError(f"{self.uri} is not open as an output")
+        if frame.num_channels != self.spec.channel_count:
+            raise StreamMismatchError(
+                f"frame has {frame.num_channels} channels, {self.topic} carries {self.spec.channel_count}"
+            )
+        if self.spec.is_string:
+            for msg in string_frame_to_msgs(frame):
+                self._pub.publish(msg)
+        else:
+            self._pub.publish(frame_to_msg(frame))
+
+    def close(self) -> None:
+        if self._sub is not None:
+            self.node.destroy_subscription(self._sub)
+            self._sub = None
+        if self._pub is not None:
+            self.node.destroy_publisher(self._pub)
+            self._pub = None
