@@ -50,9 +50,10 @@ class Gap:
 
 @dataclass
 class BufferedFrame(Frame):
-    """A dequeued frame plus the gaps that happened before its newest sample."""
+    """A dequeued frame, how many of its samples are new, and the gaps before them."""
 
     gaps: list[Gap] = field(default_factory=list)
+    fresh: int = 0
 
 
 class BufferClosed(Exception):
@@ -235,6 +236,7 @@ class RingBuffer:
             self._size -= skip
             self._retained = usable_retained
             frame = self._read(n)
+            frame.fresh = n - usable_retained
             consumed = n - overlap
             self._head = (self._head + consumed) % self.capacity
             self._size -= consumed
@@ -253,6 +255,7 @@ class RingBuffer:
             if self._size == 0 and not self._pending_gaps:
                 return None
             frame = self._read(self._size)
+            frame.fresh = frame.num_samples
             self._head = (self._head + self._size) % self.capacity
             self._size = 0
             frame.gaps, self._pending_gaps = self._pending_gaps, []

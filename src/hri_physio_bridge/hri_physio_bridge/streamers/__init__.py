@@ -1,11 +1,11 @@
 """Streamers: one interface, several transports, chosen by URI (see factory)."""
 
 from hri_physio_bridge.streamers.base import (
+    Streamer,
     StreamerError,
     StreamLostError,
     StreamMismatchError,
     StreamNotFoundError,
-    Streamer,
     StreamSpec,
     canonical_dtype,
     numpy_dtype,

@@ -123,6 +123,10 @@ class Streamer(abc.ABC):
     def publish(self, frame: Frame) -> None:
         """Send a frame of samples."""
 
+    def has_consumers(self) -> bool:
+        """Whether anything listens to this output (transports that cannot tell say True)."""
+        return True
+
     def close(self) -> None:  # noqa: B027 - optional hook, most streamers need it
         """Release the transport (idempotent)."""
 

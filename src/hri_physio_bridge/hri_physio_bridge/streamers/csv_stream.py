@@ -24,10 +24,10 @@ import numpy as np
 
 from hri_physio_bridge.frames import TIME_LABEL, Frame
 from hri_physio_bridge.streamers.base import (
+    Streamer,
     StreamerError,
     StreamMismatchError,
     StreamNotFoundError,
-    Streamer,
     StreamSpec,
     numpy_dtype,
 )
@@ -81,7 +81,7 @@ class CsvWriter:
             np.savetxt(self._file, table, fmt=fmt, delimiter=",")
         else:
             for t, row in zip(frame.timestamps, frame.values, strict=True):
-                self._writer.writerow(["%.17g" % t, *[str(v) for v in row]])
+                self._writer.writerow([f"{t:.17g}", *[str(v) for v in row]])
         self._file.flush()
         self.rows_written += frame.num_samples
 

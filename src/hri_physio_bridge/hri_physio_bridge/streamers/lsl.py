@@ -10,6 +10,7 @@ we keep them unchanged).
 
 from __future__ import annotations
 
+import time
 from urllib.parse import parse_qs
 
 import numpy as np
@@ -17,11 +18,11 @@ import pylsl
 
 from hri_physio_bridge.frames import Frame
 from hri_physio_bridge.streamers.base import (
+    Streamer,
     StreamerError,
     StreamLostError,
     StreamMismatchError,
     StreamNotFoundError,
-    Streamer,
     StreamSpec,
     canonical_dtype,
     numpy_dtype,
@@ -188,8 +189,7 @@ class LslStreamer(Streamer):
             data = np.ascontiguousarray(cast_for_output(frame.values, self._dtype, self.uri))
         self._outlet.push_chunk(data, timestamp=frame.timestamps.tolist())
 
-    @property
-    def have_consumers(self) -> bool:
+    def has_consumers(self) -> bool:
         return bool(self._outlet is not None and self._outlet.have_consumers())
 
     def close(self) -> None:
@@ -198,6 +198,9 @@ class LslStreamer(Streamer):
                 self._inlet.close_stream()
             finally:
                 self._inlet = None
+        if self._outlet is not None and self._outlet.have_consumers():
+            # liblsl has no flush: give connected inlets a moment to take the last chunk.
+            time.sleep(0.2)
         self._outlet = None  # liblsl destroys the outlet with the object
 
 

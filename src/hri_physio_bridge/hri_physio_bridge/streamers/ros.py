@@ -11,6 +11,7 @@ import queue
 from collections.abc import Callable
 
 import numpy as np
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64MultiArray, String
@@ -24,9 +25,9 @@ from hri_physio_bridge.frames import (
     string_frame_to_msgs,
 )
 from hri_physio_bridge.streamers.base import (
+    Streamer,
     StreamerError,
     StreamMismatchError,
-    Streamer,
     StreamSpec,
     numpy_dtype,
 )
@@ -69,12 +70,8 @@ class RosStreamer(Streamer):
         spec = expected or StreamSpec(name=self.topic)
         self._expected = spec
         self._np_dtype = numpy_dtype(spec.dtype)
-        if spec.is_string:
-            self._sub = self.node.create_subscription(String, self.topic, self._on_marker, frame_qos(self.depth))
-        else:
-            self._sub = self.node.create_subscription(
-                Float64MultiArray, self.topic, self._on_frame, frame_qos(self.depth)
-            )
+        msg_type, callback = (String, self._on_marker) if spec.is_string else (Float64MultiArray, self._on_frame)
+        self._sub = self.node.create_subscription(msg_type, self.topic, callback, frame_qos(self.depth))
         self.spec = spec
         return spec
 
@@ -90,7 +87,9 @@ class RosStreamer(Streamer):
             return
         spec = self._expected
         if spec is not None and frame.num_channels != spec.channel_count:
-            self._reject(f"frame has {frame.num_channels} channel(s), num_channels is {spec.channel_count}")
+            self._reject(
+                f"frame has {frame.num_channels} channel(s), num_channels is {spec.channel_count}"
+            )
             return
         if self._np_dtype.kind == "i":
             values = frame.values
@@ -136,10 +135,15 @@ class RosStreamer(Streamer):
         else:
             self._pub.publish(frame_to_msg(frame))
 
+    def has_consumers(self) -> bool:
+        return self._pub is not None and self._pub.get_subscription_count() > 0
+
     def close(self) -> None:
         if self._sub is not None:
             self.node.destroy_subscription(self._sub)
             self._sub = None
         if self._pub is not None:
+            # Reliable delivery of the last frames before the publisher goes away.
+            self._pub.wait_for_all_acked(Duration(seconds=1.0))
             self.node.destroy_publisher(self._pub)
             self._pub = None

@@ -1,0 +1,464 @@
+"""The physio receiver pipeline: input streamer -> CSV log -> ring buffer -> output streamer.
+
+Plain Python on two threads, as the seed's producer/consumer: the producer
+pulls chunks from the input, logs every chunk (timestamps + values) before
+buffering it, checks it and enqueues it; the consumer dequeues frames of
+``output_frame`` samples with ``sample_overlap`` samples of overlap and
+publishes them. Nothing here imports rclpy; the node wires the streamers.
+
+When the input is lost the producer keeps trying to reopen it; the samples
+that went missing are reported as a gap (first and last missing timestamp,
+estimated from the nominal rate) and everything received before stays.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from hri_physio_bridge.frames import Frame
+from hri_physio_bridge.ring_buffer import BufferClosed, Gap, OverflowPolicy, RingBuffer
+from hri_physio_bridge.streamers.base import (
+    Streamer,
+    StreamerError,
+    StreamLostError,
+    StreamNotFoundError,
+    StreamSpec,
+    canonical_dtype,
+    numpy_dtype,
+)
+from hri_physio_bridge.streamers.csv_stream import CsvWriter
+
+
+class ConfigError(ValueError):
+    """A receiver option is invalid; the message names the option."""
+
+
+@dataclass
+class ReceiverConfig:
+    """The seed's receiver options (conf.yaml keys) plus a few of our own."""
+
+    input: str = "lsl:PolarH10/SIM0001/ECG"
+    output: str = "ros:/physio/polar_h10/ecg"
+    dtype: str = "float64"
+    sampling_rate: float = 130.0
+    input_frame: int = 32
+    output_frame: int = 1
+    num_channels: int = 1
+    sample_overlap: int = 0
+    buffer_length: int = 5000
+    log_data: bool = False
+    log_name: str = ""
+    # Ours: what a full buffer does, how long to wait for the source.
+    overflow_policy: str = "block"
+    resolve_timeout: float = 10.0
+    reconnect: bool = True
+    stream_type: str = ""
+    channel_names: list[str] = field(default_factory=list)
+    wait_for_consumers: float = 0.0
+
+    KEYS = (
+        "input", "output", "dtype", "sampling_rate", "input_frame", "output_frame",
+        "num_channels", "sample_overlap", "buffer_length", "log_data", "log_name",
+        "overflow_policy", "resolve_timeout", "reconnect", "stream_type", "channel_names",
+        "wait_for_consumers",
+    )
+
+    @classmethod
+    def from_mapping(cls, values: dict[str, Any], source: str = "configuration") -> ReceiverConfig:
+        unknown = sorted(set(values) - set(cls.KEYS))
+        if unknown:
+            raise ConfigError(f"{source}: unknown option(s) {unknown}; known: {list(cls.KEYS)}")
+        cfg = cls()
+        for key, value in values.items():
+            setattr(cfg, key, value)
+        cfg.validate(source)
+        return cfg
+
+    def validate(self, source: str = "configuration") -> None:
+        def fail(key: str, why: str) -> None:
+            raise ConfigError(f"{source}: {key} {why} (got {getattr(self, key)!r})")
+
+        for key in ("input", "output"):
+            if not isinstance(getattr(self, key), str) or not getattr(self, key):
+                fail(key, "must be a stream address such as lsl:<name>, ros:/<topic> or csv:<file>")
+        try:
+            self.dtype = canonical_dtype(self.dtype)
+        except ValueError as exc:
+            raise ConfigError(f"{source}: dtype: {exc}") from None
+        for key in ("input_frame", "output_frame", "num_channels", "buffer_length"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                fail(key, "must be a whole number >= 1")
+        if isinstance(self.sample_overlap, bool) or not isinstance(self.sample_overlap, int):
+            fail("sample_overlap", "must be a whole number")
+        if not 0 <= self.sample_overlap < self.output_frame:
+            fail("sample_overlap", f"must be >= 0 and < output_frame ({self.output_frame})")
+        if self.buffer_length < self.output_frame:
+            fail("buffer_length", f"must hold at least one output frame ({self.output_frame} samples)")
+        try:
+            self.sampling_rate = float(self.sampling_rate)
+        except (TypeError, ValueError):
+            fail("sampling_rate", "must be a number (Hz; 0 = irregular)")
+        if not math.isfinite(self.sampling_rate) or self.sampling_rate < 0:
+            fail("sampling_rate", "must be >= 0 Hz (0 = irregular)")
+        try:
+            OverflowPolicy.parse(self.overflow_policy)
+        except ValueError as exc:
+            raise ConfigError(f"{source}: overflow_policy: {exc}") from None
+        if not isinstance(self.log_data, bool):
+            fail("log_data", "must be true or false")
+        for key in ("resolve_timeout", "wait_for_consumers"):
+            try:
+                setattr(self, key, float(getattr(self, key)))
+            except (TypeError, ValueError):
+                fail(key, "must be a number of seconds")
+            if getattr(self, key) < 0:
+                fail(key, "must be >= 0 seconds")
+        if self.channel_names and len(self.channel_names) != self.num_channels:
+            fail("channel_names", f"must list num_channels ({self.num_channels}) names")
+
+    def expected_spec(self) -> StreamSpec:
+        return StreamSpec(
+            name=self.input,
+            type=self.stream_type or "Physio",
+            channel_count=self.num_channels,
+            nominal_rate=self.sampling_rate,
+            dtype=self.dtype,
+            channels=tuple(self.channel_names),
+        )
+
+
+@dataclass
+class ReceiverStats:
+    received_samples: int = 0
+    received_chunks: int = 0
+    published_samples: int = 0
+    published_frames: int = 0
+    logged_samples: int = 0
+    nonfinite_samples: int = 0
+    rejected_chunks: int = 0
+    publish_errors: int = 0
+    gaps: list[Gap] = field(default_factory=list)
+    reconnects: int = 0
+    connected: bool = False
+    paused: bool = False
+    last_timestamp: float = math.nan
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "connected": self.connected,
+            "paused": self.paused,
+            "received_samples": self.received_samples,
+            "received_chunks": self.received_chunks,
+            "published_samples": self.published_samples,
+            "published_frames": self.published_frames,
+            "logged_samples": self.logged_samples,
+            "nonfinite_samples": self.nonfinite_samples,
+            "rejected_chunks": self.rejected_chunks,
+            "publish_errors": self.publish_errors,
+            "gaps": len(self.gaps),
+            "missing_samples": sum(g.count for g in self.gaps),
+            "reconnects": self.reconnects,
+            "last_timestamp": self.last_timestamp,
+        }
+
+
+class PhysioReceiver:
+    """Moves samples from ``source`` to ``sink`` through a ring buffer; loses nothing silently."""
+
+    def __init__(
+        self,
+        config: ReceiverConfig,
+        source: Streamer,
+        sink: Streamer,
+        log: logging.Logger | None = None,
+        monotonic: Callable[[], float] = time.monotonic,
+        log_writer_factory: Callable[[StreamSpec], CsvWriter] | None = None,
+    ) -> None:
+        config.validate()
+        self.config = config
+        self.source = source
+        self.sink = sink
+        self.log = log or logging.getLogger("physio_receiver")
+        self._monotonic = monotonic
+        self._log_writer_factory = log_writer_factory
+        self.stats = ReceiverStats()
+        self.buffer: RingBuffer | None = None
+        self.input_spec: StreamSpec | None = None
+        self._writer: CsvWriter | None = None
+        self._stop = threading.Event()
+        self._resume = threading.Event()
+        self._resume.set()
+        self._threads: list[threading.Thread] = []
+        self._fatal: BaseException | None = None
+        self._finished = threading.Event()
+        self._lock = threading.Lock()
+        self._last_nonfinite_warning = -math.inf
+
+    # -- lifecycle -----------------------------------------------------------
+    def open(self) -> StreamSpec:
+        """Connect input and output. Raises StreamNotFoundError / StreamMismatchError."""
+        cfg = self.config
+        spec = self.source.open_input(cfg.expected_spec(), timeout=cfg.resolve_timeout)
+        # The configuration is the contract; the stream's own labels win when it has them.
+        channels = spec.channels if len(spec.channels) == cfg.num_channels else cfg.expected_spec().channels
+        out_spec = StreamSpec(
+            name=spec.name,
+            type=cfg.stream_type or spec.type,
+            channel_count=cfg.num_channels,
+            nominal_rate=cfg.sampling_rate,
+            dtype=cfg.dtype,
+            source_id=spec.source_id or "hri_physio_receiver",
+            channels=tuple(cfg.channel_names) or channels,
+        )
+        self.input_spec = out_spec
+        self.sink.open_output(out_spec)
+        if cfg.log_data:
+            self._writer = (
+                self._log_writer_factory(out_spec)
+                if self._log_writer_factory
+                else CsvWriter(cfg.log_name or default_log_name(out_spec), out_spec.channels, cfg.dtype)
+            )
+            self.log.info(f"logging every received sample to {self._writer.path}")
+        self.buffer = RingBuffer(
+            cfg.buffer_length,
+            cfg.num_channels,
+            dtype=numpy_dtype(cfg.dtype),
+            overflow=cfg.overflow_policy,
+            channels=out_spec.channels,
+            on_overflow=self._on_overflow,
+        )
+        self.stats.connected = True
+        self.log.info(
+            f"connected {self.source.uri} -> {self.sink.uri}: {cfg.num_channels} ch {cfg.dtype} "
+            f"@ {cfg.sampling_rate:g} Hz, frames of {cfg.output_frame} (overlap {cfg.sample_overlap})"
+        )
+        return out_spec
+
+    def start(self) -> None:
+        if self.buffer is None:
+            self.open()
+        self._wait_for_consumers()
+        self._threads = [
+            threading.Thread(target=self._guard(self._produce), name="receiver-producer", daemon=True),
+            threading.Thread(target=self._guard(self._consume), name="receiver-consumer", daemon=True),
+        ]
+        for t in self._threads:
+            t.start()
+
+    def _wait_for_consumers(self) -> None:
+        """Optionally hold the input until the output has a listener (log replays)."""
+        limit = self.config.wait_for_consumers
+        if limit <= 0:
+            return
+        deadline = self._monotonic() + limit
+        while not self.sink.has_consumers():
+            if self._monotonic() >= deadline:
+                self.log.warning(f"no consumer on {self.sink.uri} after {limit:g} s; starting anyway")
+                return
+            time.sleep(0.02)
+        self.log.info(f"{self.sink.uri} has a consumer")
+
+    def _guard(self, fn: Callable[[], None]) -> Callable[[], None]:
+        def run() -> None:
+            try:
+                fn()
+            except BaseException as exc:  # surfaced to the caller through wait()/fatal
+                self._fatal = exc
+                self.log.error(f"{threading.current_thread().name} stopped: {exc}")
+                self._stop.set()
+                if self.buffer is not None:
+                    self.buffer.close()
+                self._finished.set()
+
+        return run
+
+    @property
+    def fatal(self) -> BaseException | None:
+        return self._fatal
+
+    @property
+    def finished(self) -> bool:
+        """True once a finite input (a CSV log) has been fully forwarded, or on a fatal error."""
+        return self._finished.is_set()
+
+    def wait(self, timeout: float | None = None) -> bool:
+        return self._finished.wait(timeout)
+
+    def pause(self) -> None:
+        """Hold publishing; input is still logged and buffered."""
+        self._resume.clear()
+        self.stats.paused = True
+        self.log.info("paused: input is still logged and buffered")
+
+    def resume(self) -> None:
+        self._resume.set()
+        self.stats.paused = False
+        self.log.info("resumed")
+
+    def stop(self, timeout: float = 5.0) -> None:
+        """Stop both threads, publish what is buffered, flush the log, close both ends."""
+        self._stop.set()
+        self._resume.set()
+        for t in self._threads:
+            if t.name == "receiver-producer":
+                t.join(timeout)
+        if self.buffer is not None:
+            self.buffer.close()
+        for t in self._threads:
+            t.join(timeout)
+        self._publish_rest()
+        if self._writer is not None:
+            self._writer.close()
+            self._writer = None
+        self.source.close()
+        self.sink.close()
+        self.stats.connected = False
+        self.log.info(f"stopped: {self.stats.as_dict()}")
+
+    # -- producer ------------------------------------------------------------
+    def _produce(self) -> None:
+        while not self._stop.is_set():
+            try:
+                chunk = self.source.receive(timeout=0.1)
+            except StreamLostError as exc:
+                self._handle_lost(exc)
+                continue
+            if chunk is None:
+                if getattr(self.source, "exhausted", False):
+                    self.log.info(f"{self.source.uri}: end of input")
+                    self.buffer.close()
+                    return
+                continue
+            self._accept(chunk)
+
+    def _accept(self, chunk: Frame) -> None:
+        cfg = self.config
+        if chunk.num_channels != cfg.num_channels:
+            self.stats.rejected_chunks += 1
+            self.log.error(
+                f"{self.source.uri}: chunk with {chunk.num_channels} channel(s) rejected, "
+                f"num_channels is {cfg.num_channels}"
+            )
+            return
+        # Log first: the CSV is the record of what arrived, whatever happens next.
+        if self._writer is not None:
+            self._writer.write(chunk)
+            self.stats.logged_samples += chunk.num_samples
+        self._check_values(chunk)
+        self._check_continuity(chunk)
+        with self._lock:
+            self.stats.received_samples += chunk.num_samples
+            self.stats.received_chunks += 1
+            self.stats.last_timestamp = float(chunk.timestamps[-1])
+        try:
+            self.buffer.enqueue(chunk.timestamps, chunk.values)
+        except BufferClosed:
+            if not self._stop.is_set():
+                raise
+
+    def _check_values(self, chunk: Frame) -> None:
+        if chunk.is_string or chunk.values.dtype.kind != "f":
+            return
+        bad = ~np.isfinite(chunk.values)
+        if bad.any():
+            count = int(bad.any(axis=1).sum())
+            self.stats.nonfinite_samples += count
+            now = self._monotonic()
+            if now - self._last_nonfinite_warning > 5.0:
+                self._last_nonfinite_warning = now
+                self.log.warning(
+                    f"{self.source.uri}: {count} sample(s) with NaN/inf near t={chunk.timestamps[0]:.3f} "
+                    f"(forwarded unchanged; {self.stats.nonfinite_samples} so far)"
+                )
+
+    def _check_continuity(self, chunk: Frame) -> None:
+        """Report missing samples when the timestamps jump by more than 1.5 periods."""
+        rate = self.config.sampling_rate
+        last = self.stats.last_timestamp
+        if rate <= 0 or math.isnan(last):
+            return
+        period = 1.0 / rate
+        step = float(chunk.timestamps[0]) - last
+        if step > 1.5 * period:
+            missing = round(step * rate) - 1
+            gap = Gap(last + period, float(chunk.timestamps[0]) - period, missing, "no samples received")
+            self.stats.gaps.append(gap)
+            self.log.warning(
+                f"{self.source.uri}: gap of {missing} sample(s) from t={gap.first_t:.4f} "
+                f"to t={gap.last_t:.4f} ({step:.3f} s without data)"
+            )
+
+    def _handle_lost(self, exc: StreamerError) -> None:
+        self.stats.connected = False
+        self.log.warning(f"{exc}; waiting for it to come back (data received so far is kept)")
+        if not self.config.reconnect:
+            raise exc
+        while not self._stop.is_set():
+            try:
+                self.source.open_input(self.config.expected_spec(), timeout=1.0)
+            except StreamNotFoundError:
+                continue
+            self.stats.connected = True
+            self.stats.reconnects += 1
+            self.log.info(f"{self.source.uri}: reconnected")
+            return
+
+    def _on_overflow(self, gap: Gap) -> None:
+        if gap.count:
+            self.log.warning(
+                f"buffer overflow: dropped {gap.count} oldest sample(s) t={gap.first_t:.4f}..{gap.last_t:.4f}"
+            )
+        else:
+            self.log.warning("buffer full: producer waits for the consumer (raise buffer_length?)")
+
+    # -- consumer ------------------------------------------------------------
+    def _consume(self) -> None:
+        cfg = self.config
+        while True:
+            self._resume.wait()
+            frame = self.buffer.dequeue_frame(cfg.output_frame, cfg.sample_overlap, timeout=0.1)
+            if frame is None:
+                if self.buffer.closed:
+                    if not self._stop.is_set():
+                        # Finite input done: forward the tail, then report completion.
+                        self._publish_rest()
+                        self._finished.set()
+                    return
+                continue
+            self._resume.wait()  # a pause that came while waiting for this frame holds it
+            self._publish(frame)
+
+    def _publish(self, frame: Frame) -> None:
+        for gap in getattr(frame, "gaps", ()):
+            self.stats.gaps.append(gap)
+        try:
+            self.sink.publish(frame)
+        except StreamerError as exc:
+            self.stats.publish_errors += 1
+            self.log.error(f"{self.sink.uri}: could not publish frame at t={frame.timestamps[0]:.4f}: {exc}")
+            return
+        with self._lock:
+            self.stats.published_samples += getattr(frame, "fresh", frame.num_samples)
+            self.stats.published_frames += 1
+
+    def _publish_rest(self) -> None:
+        if self.buffer is None:
+            return
+        rest = self.buffer.drain()
+        if rest is not None and rest.num_samples:
+            self.log.info(f"publishing the last {rest.num_samples} buffered sample(s) as a short frame")
+            self._publish(rest)
+
+
+def default_log_name(spec: StreamSpec) -> str:
+    safe = "".join(c if c.isalnum() or c in "-_" else "_" for c in spec.name).strip("_") or "stream"
+    return f"logs/{safe}_{time.strftime('%Y%m%d-%H%M%S')}.csv"

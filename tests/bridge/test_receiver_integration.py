@@ -1,0 +1,319 @@
+"""physio_receiver end to end: real pylsl outlets/inlets, real rclpy, the node as a subprocess.
+
+A counter channel proves that every sample arrives exactly once, in order,
+with its original LSL timestamp (the technique of mne-lsl's tests).
+"""
+
+from __future__ import annotations
+
+import itertools
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pylsl
+import pytest
+
+from helpers import NodeProcess, RosFrameCollector, concat_new_samples, wait_until
+
+pytestmark = [pytest.mark.ros, pytest.mark.lsl]
+
+RATE = 130.0
+
+
+def counter_outlet(name: str, channels: int = 2, fmt: int = pylsl.cf_double64,
+                   source_id: str = "") -> pylsl.StreamOutlet:
+    info = pylsl.StreamInfo(name, "ECG", channels, RATE, fmt, source_id or name)
+    return pylsl.StreamOutlet(info)
+
+
+def push_counter(outlet: pylsl.StreamOutlet, start: int, n: int, t0: float, chunk: int = 13,
+                 channels: int = 2, realtime: bool = False) -> np.ndarray:
+    """Push samples [i, -i, ...] stamped t0 + i/RATE; returns the timestamps pushed."""
+    stamps = t0 + np.arange(start, start + n) / RATE
+    for i in range(start, start + n, chunk):
+        j = min(i + chunk, start + n)
+        rows = [[float(k) * (1 if c == 0 else -c) for c in range(channels)] for k in range(i, j)]
+        outlet.push_chunk(rows, timestamp=list(stamps[i - start : j - start]))
+        if realtime:
+            time.sleep((j - i) / RATE)
+    return stamps
+
+
+def check_counter(ts: np.ndarray, vs: np.ndarray, stamps: np.ndarray, start: int = 0) -> None:
+    n = len(stamps)
+    assert len(vs) == n, f"expected {n} samples, got {len(vs)}"
+    np.testing.assert_array_equal(vs[:, 0], np.arange(start, start + n))  # once each, in order
+    np.testing.assert_array_equal(vs[:, 1], -np.arange(start, start + n))
+    np.testing.assert_array_equal(ts, stamps)  # original LSL timestamps, bit for bit
+
+
+@pytest.fixture
+def collector(ros_context):
+    c = RosFrameCollector(ros_context)
+    yield c
+    c.close()
+
+
+@pytest.mark.parametrize("frame,overlap", [(1, 0), (73, 0), (10, 4)])
+def test_lsl_to_ros_every_sample_once_in_order(lsl_name: str, collector: RosFrameCollector,
+                                               frame: int, overlap: int, tmp_path: Path) -> None:
+    topic = f"/test/{lsl_name.split('/')[0]}/ecg{frame}"
+    outlet = counter_outlet(lsl_name)
+    got = collector.subscribe_frames(topic)
+    log = tmp_path / "rx.csv"
+    with NodeProcess(
+        "physio_receiver", "--input", f"lsl:{lsl_name}", "--output", f"ros:{topic}",
+        "--num-channels", "2", "--output-frame", str(frame), "--sample-overlap", str(overlap),
+        "--log-data", "true", "--log-name", str(log), "--channel-names", "count,neg",
+        "--wait-for-consumers", "20",
+    ) as rx:
+        rx.wait_for_output("has a consumer")
+        wait_until(outlet.have_consumers, 20, "discovery")
+        time.sleep(0.3)
+        stamps = push_counter(outlet, 0, 1300, pylsl.local_clock())
+        wait_until(lambda: sum(f.num_samples for f in got) >= 1300 - frame, 30, "frames")
+        assert rx.stop(signal.SIGINT) == 0, rx.output
+    ts, vs = concat_new_samples(got, frame, overlap)
+    check_counter(ts, vs, stamps)
+    assert all(f.channels == ("count", "neg") for f in got)
+    if overlap:
+        full = [f for f in got if f.num_samples == frame]
+        for a, b in itertools.pairwise(full):
+            np.testing.assert_array_equal(a.values[-overlap:], b.values[:overlap])
+    # The CSV log holds every received sample too.
+    logged = np.loadtxt(log, delimiter=",", skiprows=1)
+    np.testing.assert_array_equal(logged[:, 1], np.arange(1300))
+    np.testing.assert_array_equal(logged[:, 0], stamps)
+
+
+def test_ros_to_lsl_every_sample_once_in_order(lsl_name: str, ros_context) -> None:
+    from rclpy.node import Node
+    from std_msgs.msg import Float64MultiArray
+
+    from hri_physio_bridge.frames import Frame, frame_to_msg
+    from hri_physio_bridge.streamers.ros import frame_qos
+
+    topic = f"/test/{lsl_name.split('/')[0]}/to_lsl"
+    node = Node("pub", context=ros_context)
+    pub = node.create_publisher(Float64MultiArray, topic, frame_qos())
+    with NodeProcess(
+        "physio_receiver", "--input", f"ros:{topic}", "--output", f"lsl:{lsl_name}?type=ECG",
+        "--num-channels", "2", "--output-frame", "5", "--dtype", "int32",
+    ) as rx:
+        rx.wait_for_output("connected")
+        infos = pylsl.resolve_byprop("name", lsl_name, 1, 20)
+        assert infos, rx.output
+        assert infos[0].channel_format() == pylsl.cf_int32 and infos[0].type() == "ECG"
+        inlet = pylsl.StreamInlet(infos[0])
+        inlet.open_stream(10)
+        wait_until(lambda: pub.get_subscription_count() > 0, 20, "receiver subscription")
+        t0 = 5000.0
+        n = 600
+        for i in range(0, n, 20):
+            idx = np.arange(i, i + 20)
+            pub.publish(frame_to_msg(Frame(t0 + idx / RATE, np.column_stack([idx, -idx]))))
+        rows, stamps = [], []
+        deadline = time.monotonic() + 30
+        while len(rows) < n and time.monotonic() < deadline:
+            data, ts = inlet.pull_chunk(timeout=0.5, max_samples=1000)
+            rows.extend(data)
+            stamps.extend(ts)
+        assert rx.stop() == 0, rx.output
+    check_counter(np.array(stamps), np.array(rows), t0 + np.arange(n) / RATE)
+    node.destroy_node()
+
+
+def test_lsl_to_lsl_and_lsl_to_csv(lsl_name: str, tmp_path: Path) -> None:
+    out_csv = tmp_path / "out.csv"
+    outlet = counter_outlet(lsl_name, fmt=pylsl.cf_int16)
+    relay = f"{lsl_name}-relay"
+    with NodeProcess(
+        "physio_receiver", "--input", f"lsl:{lsl_name}", "--output", f"lsl:{relay}",
+        "--num-channels", "2", "--dtype", "int16", "--output-frame", "7",
+    ) as lsl_rx, NodeProcess(
+        "physio_receiver", "--input", f"lsl:{relay}", "--output", f"csv:{out_csv}",
+        "--num-channels", "2", "--dtype", "int16", "--output-frame", "3",
+    ) as csv_rx:
+        csv_rx.wait_for_output("connected", 30)
+        lsl_rx.wait_for_output("connected", 30)
+        wait_until(outlet.have_consumers, 20, "relay inlet")
+        stamps = push_counter(outlet, 0, 500, pylsl.local_clock())
+
+        def rows() -> int:
+            return len(out_csv.read_text().splitlines()) - 1 if out_csv.exists() else 0
+
+        # Frames of 7 then 3: the relay holds back 3 samples, the CSV end 2 more.
+        wait_until(lambda: rows() >= 495, 30, lambda: f"csv rows\n{lsl_rx.output}\n{csv_rx.output}")
+        assert lsl_rx.stop() == 0  # publishes its last 3 samples on the way out
+        wait_until(lambda: rows() >= 498, 20, lambda: f"relay tail\n{lsl_rx.output}\n{csv_rx.output}")
+        assert csv_rx.stop() == 0  # writes its last 2
+    table = np.loadtxt(out_csv, delimiter=",", skiprows=1)
+    check_counter(table[:, 0], table[:, 1:], stamps)
+
+
+def test_csv_replay_to_ros(collector: RosFrameCollector, tmp_path: Path) -> None:
+    log = tmp_path / "session.csv"
+    idx = np.arange(1000)
+    stamps = 12345.678 + idx / RATE
+    with log.open("w") as f:
+        f.write("t,count,neg\n")
+        for t, i in zip(stamps, idx, strict=True):
+            f.write(f"{float(t)!r},{i},{-i}\n")
+    topic = "/test/replay/ecg"
+    got = collector.subscribe_frames(topic)
+    with NodeProcess(
+        "physio_receiver", "--input", f"csv:{log}?rate=0", "--output", f"ros:{topic}",
+        "--num-channels", "2", "--output-frame", "64", "--wait-for-consumers", "20",
+    ) as rx:
+        code = rx.wait(60)  # the replay ends by itself at the end of the file
+        assert code == 0, rx.output
+        wait_until(lambda: sum(f.num_samples for f in got) >= 1000, 10, "replayed frames")
+    ts, vs = concat_new_samples(got, 64, 0)
+    check_counter(ts, vs, stamps)
+
+
+def test_source_disappears_and_returns(lsl_name: str, collector: RosFrameCollector) -> None:
+    topic = "/test/gap/ecg"
+    got = collector.subscribe_frames(topic)
+    outlet = counter_outlet(lsl_name, source_id="gap-src")
+    with NodeProcess(
+        "physio_receiver", "--input", f"lsl:{lsl_name}", "--output", f"ros:{topic}",
+        "--num-channels", "2", "--output-frame", "1", "--wait-for-consumers", "20",
+    ) as rx:
+        rx.wait_for_output("has a consumer")
+        wait_until(outlet.have_consumers, 20, "discovery")
+        t0 = pylsl.local_clock()
+        first = push_counter(outlet, 0, 200, t0)
+        wait_until(lambda: len(got) >= 200, 20, "first part")
+        del outlet  # the strap goes out of range
+        rx.wait_for_output("waiting for it to come back", 20)
+        time.sleep(1.0)
+        outlet = counter_outlet(lsl_name, source_id="gap-src")
+        rx.wait_for_output("reconnected", 30)
+        wait_until(outlet.have_consumers, 20, "reconnected inlet")
+        second = push_counter(outlet, 400, 200, t0)
+        wait_until(lambda: len(got) >= 400, 20, "second part")
+        rx.wait_for_output("gap of 200 sample(s)", 10)
+        assert rx.stop() == 0, rx.output
+    ts, vs = concat_new_samples(got, 1, 0)
+    np.testing.assert_array_equal(vs[:, 0], np.r_[0:200, 400:600])
+    np.testing.assert_array_equal(ts, np.r_[first, second])
+    expected_first_missing = f"from t={first[-1] + 1 / RATE:.4f} to t={second[0] - 1 / RATE:.4f}"
+    assert expected_first_missing in rx.output
+
+
+# -- bad input -------------------------------------------------------------------------
+
+
+def test_stream_never_appears_names_it_and_lists_seen(lsl_name: str) -> None:
+    other = counter_outlet(f"{lsl_name}-present")
+    with NodeProcess(
+        "physio_receiver", "--input", f"lsl:{lsl_name}-absent", "--output", "ros:/test/none",
+        "--resolve-timeout", "1.5",
+    ) as rx:
+        code = rx.wait(30)
+    assert code == 1
+    assert f"name='{lsl_name}-absent'" in rx.output and "did not appear within 1.5 s" in rx.output
+    assert f"{lsl_name}-present" in rx.output  # the streams it did see
+    assert "Traceback" not in rx.output
+    del other
+
+
+@pytest.mark.parametrize(
+    "fmt,channels,args,message",
+    [
+        (pylsl.cf_double64, 3, ["--num-channels", "2"], "it has 3 channel(s) but num_channels is 2"),
+        (pylsl.cf_float32, 2, ["--num-channels", "2"], "its format is float32 but dtype is float64"),
+    ],
+)
+def test_wrong_channel_count_or_dtype(lsl_name: str, fmt: int, channels: int, args: list,
+                                      message: str) -> None:
+    outlet = counter_outlet(lsl_name, channels=channels, fmt=fmt)
+    with NodeProcess("physio_receiver", "--input", f"lsl:{lsl_name}", "--output", "ros:/test/x",
+                     *args) as rx:
+        code = rx.wait(30)
+    assert code == 1 and message in rx.output and "Traceback" not in rx.output, rx.output
+    del outlet
+
+
+def test_nan_samples_are_reported_and_forwarded(lsl_name: str, collector: RosFrameCollector) -> None:
+    topic = "/test/nan/ecg"
+    got = collector.subscribe_frames(topic)
+    outlet = counter_outlet(lsl_name, channels=1)
+    with NodeProcess("physio_receiver", "--input", f"lsl:{lsl_name}", "--output", f"ros:{topic}",
+                     "--wait-for-consumers", "20") as rx:
+        rx.wait_for_output("has a consumer")
+        wait_until(outlet.have_consumers, 20, "discovery")
+        t0 = pylsl.local_clock()
+        outlet.push_chunk([[1.0], [float("nan")], [float("inf")], [4.0]],
+                          timestamp=[t0, t0 + 1 / RATE, t0 + 2 / RATE, t0 + 3 / RATE])
+        rx.wait_for_output("2 sample(s) with NaN/inf")
+        wait_until(lambda: len(got) >= 4, 20, "frames")
+        assert rx.stop() == 0
+    values = np.concatenate([f.values[:, 0] for f in got])
+    assert values[0] == 1.0 and np.isnan(values[1]) and np.isinf(values[2]) and values[3] == 4.0
+
+
+@pytest.mark.parametrize(
+    "conf_text,args,message",
+    [
+        ("input: [unclosed\n", [], "is not valid YAML at line"),
+        ("input: lsl:x\ncolour: red\n", [], "unknown option(s) ['colour']"),
+        ("output_frame: 0\n", [], "output_frame must be a whole number >= 1"),
+        ("", ["--input", "udp:1234"], "unknown stream scheme 'udp'"),
+        ("", ["--sample-overlap", "3", "--output-frame", "2"], "sample_overlap must be >= 0 and <"),
+        ("", ["--dtype", "complex"], "unknown dtype 'complex'"),
+    ],
+)
+def test_bad_configuration_one_clear_message(tmp_path: Path, conf_text: str, args: list,
+                                             message: str) -> None:
+    conf = tmp_path / "conf.yaml"
+    conf.write_text(conf_text)
+    with NodeProcess("physio_receiver", "--conf", str(conf), *args) as rx:
+        code = rx.wait(30)
+    assert code == 2, rx.output
+    assert message in rx.output and "Traceback" not in rx.output, rx.output
+
+
+def test_missing_conf_file_and_help() -> None:
+    with NodeProcess("physio_receiver", "--conf", "/nonexistent/receiver.yaml") as rx:
+        assert rx.wait(30) == 2
+    assert "configuration file /nonexistent/receiver.yaml does not exist" in rx.output
+    with NodeProcess("physio_receiver", "--help") as rx:
+        assert rx.wait(30) == 0
+    assert "--sample-overlap" in rx.output and "--conf" in rx.output
+
+
+def test_params_file_and_interactive_console(lsl_name: str, tmp_path: Path,
+                                             collector: RosFrameCollector) -> None:
+    topic = "/test/params/ecg"
+    params = tmp_path / "params.yaml"
+    params.write_text(
+        "physio_receiver:\n  ros__parameters:\n"
+        f"    input: lsl:{lsl_name}\n    output: ros:{topic}\n    output_frame: 4\n"
+        "    wait_for_consumers: 20.0\n"
+    )
+    got = collector.subscribe_frames(topic)
+    outlet = counter_outlet(lsl_name, channels=1)
+    with NodeProcess("physio_receiver", "--interactive", "--ros-args", "--params-file", str(params),
+                     stdin=subprocess.PIPE) as rx:
+        rx.wait_for_output("has a consumer")
+        wait_until(outlet.have_consumers, 20, "discovery")
+        rx.proc.stdin.write("pause\n")
+        rx.proc.stdin.flush()
+        rx.wait_for_output("paused")
+        t0 = pylsl.local_clock()
+        outlet.push_chunk([[float(i)] for i in range(8)], timestamp=[t0 + i / RATE for i in range(8)])
+        time.sleep(0.5)
+        assert got == []  # held while paused
+        rx.proc.stdin.write("status\nresume\n")
+        rx.proc.stdin.flush()
+        rx.wait_for_output('"received_samples": 8')
+        wait_until(lambda: len(got) >= 2, 20, "frames after resume")
+        rx.proc.stdin.write("quit\n")
+        rx.proc.stdin.flush()
+        assert rx.wait(20) == 0, rx.output
+    assert [f.num_samples for f in got] == [4, 4]

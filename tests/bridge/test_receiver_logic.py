@@ -1,0 +1,270 @@
+"""PhysioReceiver pipeline logic with in-memory streamers (no LSL, no ROS)."""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hri_physio_bridge.frames import Frame
+from hri_physio_bridge.receiver import ConfigError, PhysioReceiver, ReceiverConfig
+from hri_physio_bridge.streamers import (
+    Streamer,
+    StreamerError,
+    StreamLostError,
+    StreamNotFoundError,
+    StreamSpec,
+)
+from hri_physio_bridge.streamers.csv_stream import CsvStreamer
+
+
+class MemorySource(Streamer):
+    """Input fed by the test; can simulate a lost stream that comes back."""
+
+    scheme = "mem"
+
+    def __init__(self, spec: StreamSpec) -> None:
+        super().__init__("source")
+        self._spec = spec
+        self.chunks: queue.Queue[Frame | Exception | None] = queue.Queue()
+        self.available = threading.Event()
+        self.available.set()
+        self.opens = 0
+        self.exhausted = False
+
+    def open_input(self, expected: StreamSpec | None = None, timeout: float = 10.0) -> StreamSpec:
+        if not self.available.wait(timeout):
+            raise StreamNotFoundError("memory source not available")
+        self.opens += 1
+        return self._spec
+
+    def open_output(self, spec: StreamSpec) -> None:
+        raise StreamerError("input only")
+
+    def receive(self, timeout: float = 0.1) -> Frame | None:
+        try:
+            item = self.chunks.get(timeout=timeout)
+        except queue.Empty:
+            return None
+        if item is None:
+            self.exhausted = True
+            return None
+        if isinstance(item, Exception):
+            raise item
+        return item
+
+    def publish(self, frame: Frame) -> None:
+        raise StreamerError("input only")
+
+
+class MemorySink(Streamer):
+    scheme = "mem"
+
+    def __init__(self, fail_first: int = 0) -> None:
+        super().__init__("sink")
+        self.frames: list[Frame] = []
+        self.fail_first = fail_first
+        self.closed = False
+
+    def open_input(self, expected: StreamSpec | None = None, timeout: float = 10.0) -> StreamSpec:
+        raise StreamerError("output only")
+
+    def open_output(self, spec: StreamSpec) -> None:
+        self.spec = spec
+
+    def receive(self, timeout: float = 0.1) -> Frame | None:
+        raise StreamerError("output only")
+
+    def publish(self, frame: Frame) -> None:
+        if self.fail_first > 0:
+            self.fail_first -= 1
+            raise StreamerError("sink hiccup")
+        self.frames.append(frame)
+
+    def close(self) -> None:
+        self.closed = True
+
+
+def chunk(start: int, n: int, rate: float = 100.0, channels: int = 1) -> Frame:
+    idx = np.arange(start, start + n, dtype=float)
+    return Frame(idx / rate, np.column_stack([idx] * channels))
+
+
+def make(tmp_path: Path | None = None, **overrides) -> tuple[PhysioReceiver, MemorySource, MemorySink]:
+    opts = {"input": "mem:source", "output": "mem:sink", "sampling_rate": 100.0, "output_frame": 4,
+            "buffer_length": 64}
+    opts.update(overrides)
+    cfg = ReceiverConfig.from_mapping(opts)
+    src = MemorySource(StreamSpec("src", channel_count=cfg.num_channels, nominal_rate=cfg.sampling_rate))
+    sink = MemorySink()
+    return PhysioReceiver(cfg, src, sink, log=logging.getLogger("test")), src, sink
+
+
+def run_to_end(rx: PhysioReceiver, src: MemorySource, chunks: list[Frame]) -> None:
+    rx.start()
+    for c in chunks:
+        src.chunks.put(c)
+    src.chunks.put(None)  # end of input
+    assert rx.wait(5.0), "receiver did not finish"
+    rx.stop()
+
+
+def test_every_sample_forwarded_once_in_order_with_overlap_and_tail() -> None:
+    rx, src, sink = make(output_frame=5, sample_overlap=2)
+    chunks = [chunk(i, 3) for i in range(0, 30, 3)]
+    run_to_end(rx, src, chunks)
+    firsts = [sink.frames[0].values[:, 0]] + [f.values[2:, 0] for f in sink.frames[1:-1]]
+    # The tail frame (from drain) holds only unpublished samples.
+    all_new = np.concatenate([*firsts, sink.frames[-1].values[:, 0]])
+    np.testing.assert_array_equal(all_new, np.arange(30))
+    for f in sink.frames[:-1]:
+        np.testing.assert_array_equal(f.timestamps, f.values[:, 0] / 100.0)
+    assert rx.stats.received_samples == 30 and rx.stats.published_samples == 30
+    assert sink.closed
+
+
+def test_csv_log_written_before_buffering(tmp_path: Path) -> None:
+    log_path = tmp_path / "logs" / "ecg.csv"
+    rx, src, _ = make(log_data=True, log_name=str(log_path), num_channels=2)
+    rx.open()
+    src.chunks.put(chunk(0, 3, channels=2))
+    # Run only the producer step: the chunk must be in the log even before any frame exists.
+    rx._accept(src.receive())
+    rows = log_path.read_text().splitlines()
+    assert rows[0] == "t,ch1,ch2" and len(rows) == 4
+    rx.stop()
+    back = CsvStreamer(f"{log_path}?rate=0")
+    back.open_input()
+    f = back.receive()
+    np.testing.assert_array_equal(f.values, chunk(0, 3, channels=2).values)
+
+
+def test_gap_in_timestamps_is_reported_with_first_and_last_missing() -> None:
+    rx, src, _ = make()
+    run_to_end(rx, src, [chunk(0, 10), chunk(25, 10)])
+    assert len(rx.stats.gaps) == 1
+    gap = rx.stats.gaps[0]
+    assert gap.count == 15
+    assert gap.first_t == pytest.approx(0.10) and gap.last_t == pytest.approx(0.24)
+    assert rx.stats.published_samples == 20  # nothing received is lost
+
+
+def test_lost_source_reconnects_and_keeps_data() -> None:
+    rx, src, sink = make()
+    rx.start()
+    src.chunks.put(chunk(0, 8))
+    src.available.clear()
+    src.chunks.put(StreamLostError("memory stream lost"))
+    threading.Timer(0.3, src.available.set).start()
+    src.chunks.put(chunk(20, 8))
+    src.chunks.put(None)
+    assert rx.wait(5.0)
+    rx.stop()
+    assert src.opens == 2 and rx.stats.reconnects == 1
+    got = np.concatenate([f.values[:, 0] for f in sink.frames])
+    np.testing.assert_array_equal(got, np.r_[0:8, 20:28])
+    assert [g.count for g in rx.stats.gaps] == [12]
+
+
+def test_lost_source_without_reconnect_is_fatal_but_flushes() -> None:
+    rx, src, sink = make(reconnect=False)
+    rx.start()
+    src.chunks.put(chunk(0, 6))
+    src.chunks.put(StreamLostError("gone"))
+    assert rx.wait(5.0)
+    rx.stop()
+    assert isinstance(rx.fatal, StreamLostError)
+    assert sum(f.num_samples for f in sink.frames) == 6
+
+
+def test_wrong_channel_count_chunk_is_rejected_and_counted() -> None:
+    rx, src, _ = make()
+    run_to_end(rx, src, [chunk(0, 4), chunk(4, 4, channels=3), chunk(8, 4)])
+    assert rx.stats.rejected_chunks == 1
+    assert rx.stats.published_samples == 8
+
+
+def test_nonfinite_samples_are_counted_and_forwarded(caplog: pytest.LogCaptureFixture) -> None:
+    rx, src, sink = make()
+    bad = chunk(0, 4)
+    bad.values[1, 0] = np.nan
+    bad.values[2, 0] = np.inf
+    with caplog.at_level(logging.WARNING, logger="test"):
+        run_to_end(rx, src, [bad])
+    assert rx.stats.nonfinite_samples == 2
+    assert "2 sample(s) with NaN/inf" in caplog.text
+    assert np.isnan(sink.frames[0].values[1, 0])
+
+
+def test_publish_errors_are_counted_not_fatal() -> None:
+    rx, src, _ = make()
+    rx.sink = sink = MemorySink(fail_first=1)
+    run_to_end(rx, src, [chunk(0, 8)])
+    assert rx.stats.publish_errors == 1 and rx.fatal is None
+    assert len(sink.frames) == 1
+
+
+def test_pause_holds_output_resume_releases_it() -> None:
+    rx, src, sink = make()
+    rx.start()
+    rx.pause()
+    src.chunks.put(chunk(0, 8))
+    threading.Event().wait(0.3)
+    assert sink.frames == [] and rx.stats.received_samples == 8
+    rx.resume()
+    src.chunks.put(None)
+    assert rx.wait(5.0)
+    rx.stop()
+    assert sum(f.num_samples for f in sink.frames) == 8
+
+
+def test_stop_mid_stream_publishes_what_was_buffered() -> None:
+    rx, src, sink = make(output_frame=50)
+    rx.start()
+    src.chunks.put(chunk(0, 7))
+    deadline = threading.Event()
+    while rx.stats.received_samples < 7 and not deadline.wait(0.01):
+        pass
+    rx.stop()
+    assert sum(f.num_samples for f in sink.frames) == 7
+
+
+def test_drop_oldest_overflow_reported_as_gap() -> None:
+    rx, src, sink = make(overflow_policy="drop_oldest", buffer_length=8, output_frame=8)
+    rx.open()
+    rx._accept(chunk(0, 8))
+    rx._accept(chunk(8, 4))  # buffer full: 0..3 dropped
+    rx.start()
+    src.chunks.put(None)
+    assert rx.wait(5.0)
+    rx.stop()
+    assert [(g.count, g.reason.startswith("buffer overflow")) for g in rx.stats.gaps] == [(4, True)]
+    np.testing.assert_array_equal(sink.frames[0].values[:, 0], np.arange(4, 12))
+
+
+@pytest.mark.parametrize(
+    "overrides,match",
+    [
+        ({"output_frame": 0}, "output_frame must be a whole number >= 1"),
+        ({"sample_overlap": 4}, "sample_overlap must be >= 0 and < output_frame"),
+        ({"buffer_length": 2}, "buffer_length must hold at least one output frame"),
+        ({"dtype": "complex128"}, "dtype: unknown dtype"),
+        ({"sampling_rate": -5}, "sampling_rate must be >= 0"),
+        ({"sampling_rate": "fast"}, "sampling_rate must be a number"),
+        ({"overflow_policy": "panic"}, "unknown overflow policy"),
+        ({"log_data": "yes"}, "log_data must be true or false"),
+        ({"num_channels": 2.5}, "num_channels must be a whole number"),
+        ({"colour": "red"}, r"unknown option\(s\) \['colour'\]"),
+        ({"input": ""}, "input must be a stream address"),
+        ({"channel_names": ["a", "b"]}, "channel_names must list num_channels"),
+    ],
+)
+def test_bad_configuration_is_named(overrides: dict, match: str) -> None:
+    opts = {"output_frame": 4}
+    opts.update(overrides)
+    with pytest.raises(ConfigError, match=match):
+        ReceiverConfig.from_mapping(opts)
