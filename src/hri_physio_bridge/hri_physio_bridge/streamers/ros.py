@@ -70,7 +70,10 @@ class RosStreamer(Streamer):
         spec = expected or StreamSpec(name=self.topic)
         self._expected = spec
         self._np_dtype = numpy_dtype(spec.dtype)
-        msg_type, callback = (String, self._on_marker) if spec.is_string else (Float64MultiArray, self._on_frame)
+        if spec.is_string:
+            msg_type, callback = String, self._on_marker
+        else:
+            msg_type, callback = Float64MultiArray, self._on_frame
         self._sub = self.node.create_subscription(msg_type, self.topic, callback, frame_qos(self.depth))
         self.spec = spec
         return spec
