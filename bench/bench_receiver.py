@@ -24,6 +24,7 @@ import sys
 import threading
 import time
 import uuid
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -156,7 +157,7 @@ def proc_usage(proc: psutil.Process, wall: float, cpu0: float) -> tuple[float, f
     return cpu, peak
 
 
-def wait_for(pred, timeout: float) -> bool:  # noqa: ANN001
+def wait_for(pred: Callable[[], bool], timeout: float) -> bool:
     deadline = time.monotonic() + timeout
     while not pred():
         if time.monotonic() > deadline:
@@ -267,7 +268,9 @@ def throughput_section(seconds: float) -> None:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     sub = parser.add_subparsers(dest="mode")
     relay = sub.add_parser("relay", help="(internal) run the minimal relay")
     relay.add_argument("--name", required=True)

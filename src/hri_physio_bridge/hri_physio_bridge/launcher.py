@@ -1,0 +1,115 @@
+"""A small process launcher: start node console scripts, prefix their output, stop them cleanly.
+
+There is no ``ros2 launch`` in the pip-wheel ROS 2 used here, so systems are
+started by this launcher (on a full ROS 2 install the same nodes also run with
+``ros2 run``). Stopping sends SIGINT, then SIGTERM, then SIGKILL, each after a
+grace period, so nodes can flush their logs and bags.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TextIO
+
+
+def find_executable(name: str) -> str:
+    """Path of a console script: next to this interpreter first, then on PATH."""
+    local = Path(sys.prefix) / "bin" / name
+    if local.exists():
+        return str(local)
+    found = shutil.which(name)
+    if found is None:
+        raise FileNotFoundError(
+            f"console script {name!r} not found (is the project installed? run scripts/setup)"
+        )
+    return found
+
+
+@dataclass
+class ManagedProcess:
+    name: str
+    argv: list[str]
+    proc: subprocess.Popen
+    reader: threading.Thread
+    lines: list[str] = field(default_factory=list)
+
+    @property
+    def returncode(self) -> int | None:
+        return self.proc.poll()
+
+
+class ProcessGroup:
+    """Processes started together and stopped together, in reverse order."""
+
+    def __init__(self, out: TextIO = sys.stdout, on_line: Callable[[str, str], None] | None = None,
+                 keep_lines: int = 200) -> None:
+        self.out = out
+        self.on_line = on_line
+        self.keep_lines = keep_lines
+        self.procs: list[ManagedProcess] = []
+        self._lock = threading.Lock()
+
+    def start(self, name: str, script: str, args: Sequence[str] = (), env: dict[str, str] | None = None,
+              echo: bool = True) -> ManagedProcess:
+        argv = [find_executable(script), *args]
+        proc = subprocess.Popen(
+            argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+            env=env if env is not None else dict(os.environ), text=True, bufsize=1,
+            start_new_session=True,  # our Ctrl-C is forwarded by stop(), not delivered twice
+        )
+        managed = ManagedProcess(name, argv, proc, threading.Thread())
+        managed.reader = threading.Thread(target=self._pump, args=(managed, echo), daemon=True)
+        managed.reader.start()
+        self.procs.append(managed)
+        return managed
+
+    def _pump(self, managed: ManagedProcess, echo: bool) -> None:
+        assert managed.proc.stdout is not None
+        for raw in managed.proc.stdout:
+            line = raw.rstrip("\n")
+            managed.lines.append(line)
+            del managed.lines[: -self.keep_lines]
+            if self.on_line is not None:
+                self.on_line(managed.name, line)
+            if echo:
+                with self._lock:
+                    print(f"[{managed.name}] {line}", file=self.out, flush=True)
+
+    def wait_any_exit(self, timeout: float | None = None) -> ManagedProcess | None:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while deadline is None or time.monotonic() < deadline:
+            for p in self.procs:
+                if p.returncode is not None:
+                    return p
+            time.sleep(0.05)
+        return None
+
+    def stop(self, grace: float = 10.0) -> dict[str, int]:
+        """Stop every process (reverse start order); returns exit codes by name."""
+        codes: dict[str, int] = {}
+        for p in reversed(self.procs):
+            codes[p.name] = self._stop_one(p, grace)
+        for p in self.procs:
+            p.reader.join(2.0)
+        return codes
+
+    @staticmethod
+    def _stop_one(p: ManagedProcess, grace: float) -> int:
+        for sig, wait in ((signal.SIGINT, grace), (signal.SIGTERM, grace / 2), (signal.SIGKILL, 5.0)):
+            if p.proc.poll() is not None:
+                break
+            p.proc.send_signal(sig)
+            try:
+                p.proc.wait(wait)
+            except subprocess.TimeoutExpired:
+                continue
+        return p.proc.wait()

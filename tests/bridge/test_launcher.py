@@ -1,0 +1,65 @@
+"""The process launcher: output capture, clean stop escalation, missing scripts."""
+
+from __future__ import annotations
+
+import io
+import os
+import stat
+import sys
+from pathlib import Path
+
+import pytest
+
+from hri_physio_bridge.launcher import ProcessGroup, find_executable
+
+
+def script(tmp_path: Path, name: str, body: str) -> str:
+    path = tmp_path / name
+    path.write_text(f"#!{sys.executable}\n{body}")
+    path.chmod(path.stat().st_mode | stat.S_IEXEC)
+    return str(path)
+
+
+@pytest.fixture
+def on_path(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    monkeypatch.setenv("PATH", f"{tmp_path}{os.pathsep}{os.environ['PATH']}")
+    return tmp_path
+
+
+def test_output_is_prefixed_and_kept(on_path: Path) -> None:
+    script(on_path, "hello_node", "print('hello'); print('bye')\n")
+    out = io.StringIO()
+    group = ProcessGroup(out=out)
+    p = group.start("greeter", "hello_node", env=dict(os.environ))
+    assert group.wait_any_exit(10) is p
+    assert group.stop() == {"greeter": 0}
+    assert out.getvalue().splitlines() == ["[greeter] hello", "[greeter] bye"]
+    assert p.lines == ["hello", "bye"]
+
+
+def test_stop_sends_sigint_first_and_escalates(on_path: Path) -> None:
+    script(on_path, "polite_node", (
+        "import signal, sys, time\n"
+        "signal.signal(signal.SIGINT, lambda *a: (print('flushed', flush=True), sys.exit(0)))\n"
+        "print('ready', flush=True)\n"
+        "while True: time.sleep(0.05)\n"))
+    script(on_path, "stubborn_node", (
+        "import signal, time\n"
+        "signal.signal(signal.SIGINT, signal.SIG_IGN)\n"
+        "signal.signal(signal.SIGTERM, signal.SIG_IGN)\n"
+        "print('ready', flush=True)\n"
+        "while True: time.sleep(0.05)\n"))
+    group = ProcessGroup(out=io.StringIO())
+    polite = group.start("polite", "polite_node", env=dict(os.environ))
+    stubborn = group.start("stubborn", "stubborn_node", env=dict(os.environ))
+    for p in (polite, stubborn):
+        while "ready" not in p.lines:
+            assert p.returncode is None
+    codes = group.stop(grace=0.5)
+    assert codes["polite"] == 0 and "flushed" in polite.lines
+    assert codes["stubborn"] == -9  # SIGKILL after SIGINT and SIGTERM were ignored
+
+
+def test_missing_console_script_is_named() -> None:
+    with pytest.raises(FileNotFoundError, match="console script 'no_such_node' not found"):
+        find_executable("no_such_node")
