@@ -317,3 +317,34 @@ def test_params_file_and_interactive_console(lsl_name: str, tmp_path: Path,
         rx.proc.stdin.flush()
         assert rx.wait(20) == 0, rx.output
     assert [f.num_samples for f in got] == [4, 4]
+
+
+def test_lsl_string_markers_to_ros_json(lsl_name: str, ros_context) -> None:
+    import json
+
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from std_msgs.msg import String
+
+    from hri_physio_bridge.streamers.ros import frame_qos
+
+    topic = "/test/markers"
+    node = Node("marker_sub", context=ros_context)
+    got: list[dict] = []
+    node.create_subscription(String, topic, lambda m: got.append(json.loads(m.data)), frame_qos())
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    outlet = pylsl.StreamOutlet(pylsl.StreamInfo(lsl_name, "Markers", 1, 0, pylsl.cf_string, lsl_name))
+    with NodeProcess("physio_receiver", "--input", f"lsl:{lsl_name}", "--output", f"ros:{topic}",
+                     "--dtype", "string", "--sampling-rate", "0", "--wait-for-consumers", "20") as rx:
+        wait_until(lambda: (executor.spin_once(timeout_sec=0.01), "has a consumer" in rx.output)[1], 30,
+                   lambda: rx.output)
+        wait_until(outlet.have_consumers, 20, "inlet")
+        texts = ["start", "phase: warm-up", 'say "hi", then ünïcode']
+        for i, text in enumerate(texts):
+            outlet.push_sample([text], 100.0 + i)
+        wait_until(lambda: (executor.spin_once(timeout_sec=0.01), len(got) >= 3)[1], 20, lambda: rx.output)
+        assert rx.stop() == 0
+    assert got == [{"t": 100.0 + i, "data": text} for i, text in enumerate(texts)]
+    executor.shutdown()
+    node.destroy_node()
