@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import abc
 from dataclasses import dataclass, field
+from urllib.parse import parse_qs
 
 import numpy as np
 
@@ -40,6 +41,20 @@ _ALIASES = {
     "double": "float64", "double64": "float64", "float": "float32", "long": "int64",
     "longlong": "int64", "int": "int32", "short": "int16", "char": "int8", "str": "string",
 }
+
+
+def split_address(address: str, kind: str, what: str, known: set[str]) -> tuple[str, dict[str, str]]:
+    """Split ``<target>?key=value&...`` and refuse options the transport does not know."""
+    target, _, query = address.partition("?")
+    if not target:
+        raise ValueError(f"{kind} address {address!r} has no {what}")
+    params = {k: v[-1] for k, v in parse_qs(query, keep_blank_values=True).items()}
+    unknown = set(params) - known
+    if unknown:
+        raise ValueError(
+            f"unknown {kind} option(s) {sorted(unknown)} in {address!r}; known: {sorted(known)}"
+        )
+    return target, params
 
 
 def canonical_dtype(name: str) -> str:

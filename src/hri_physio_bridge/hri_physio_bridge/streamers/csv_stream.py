@@ -18,7 +18,6 @@ import os
 import time
 from collections.abc import Callable
 from pathlib import Path
-from urllib.parse import parse_qs
 
 import numpy as np
 
@@ -30,21 +29,14 @@ from hri_physio_bridge.streamers.base import (
     StreamNotFoundError,
     StreamSpec,
     numpy_dtype,
+    split_address,
 )
 
 _QUERY_KEYS = {"rate", "dtype"}
 
 
 def parse_csv_address(address: str) -> tuple[Path, dict[str, str]]:
-    path, _, query = address.partition("?")
-    if not path:
-        raise ValueError(f"CSV address {address!r} has no file path")
-    params = {k: v[-1] for k, v in parse_qs(query, keep_blank_values=True).items()}
-    unknown = set(params) - _QUERY_KEYS
-    if unknown:
-        raise ValueError(
-            f"unknown CSV option(s) {sorted(unknown)} in {address!r}; known: {sorted(_QUERY_KEYS)}"
-        )
+    path, params = split_address(address, "CSV", "file path", _QUERY_KEYS)
     return Path(path).expanduser(), params
 
 

@@ -11,7 +11,6 @@ we keep them unchanged).
 from __future__ import annotations
 
 import time
-from urllib.parse import parse_qs
 
 import numpy as np
 import pylsl
@@ -26,6 +25,7 @@ from hri_physio_bridge.streamers.base import (
     StreamSpec,
     canonical_dtype,
     numpy_dtype,
+    split_address,
 )
 
 _TO_LSL = {
@@ -42,16 +42,7 @@ _QUERY_KEYS = {"type", "source_id", "sync"}
 
 
 def parse_lsl_address(address: str) -> tuple[str, dict[str, str]]:
-    name, _, query = address.partition("?")
-    if not name:
-        raise ValueError(f"LSL address {address!r} has no stream name")
-    params = {k: v[-1] for k, v in parse_qs(query, keep_blank_values=True).items()}
-    unknown = set(params) - _QUERY_KEYS
-    if unknown:
-        raise ValueError(
-            f"unknown LSL option(s) {sorted(unknown)} in {address!r}; known: {sorted(_QUERY_KEYS)}"
-        )
-    return name, params
+    return split_address(address, "LSL", "stream name", _QUERY_KEYS)
 
 
 def describe_stream(info: pylsl.StreamInfo) -> str:
