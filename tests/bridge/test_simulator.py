@@ -1,0 +1,380 @@
+"""physio_simulator: signal sources, segment splicing, pacing on a fake clock, options, and
+the CLI streaming over real LSL."""
+
+from __future__ import annotations
+
+import itertools
+import signal
+import time
+from pathlib import Path
+
+import neurokit2 as nk
+import numpy as np
+import pylsl
+import pytest
+
+from helpers import NodeProcess
+from hri_physio_bridge.simulator import (
+    SIGNALS,
+    Block,
+    HeartRateValues,
+    Pacer,
+    SimulatorConfig,
+    make_source,
+    neurokit_segment,
+    options_from_mapping,
+    run_paced,
+    stream_spec,
+)
+
+NEUROKIT = [s for s in SIGNALS if s not in ("ramp", "hr")]
+
+
+def take_all(src, sizes) -> tuple[np.ndarray, np.ndarray, list[Block]]:
+    blocks = [src.take(n) for n in sizes]
+    for prev, nxt in itertools.pairwise(blocks):
+        assert nxt.first == prev.first + len(prev)  # consecutive, no gap or overlap
+    return (np.concatenate([b.timestamps for b in blocks]),
+            np.concatenate([b.values for b in blocks]), blocks)
+
+
+def r_peak_intervals(ecg: np.ndarray, fs: int) -> np.ndarray:
+    _, info = nk.ecg_peaks(ecg, sampling_rate=fs)  # ecgsyn at low noise needs no cleaning
+    return np.diff(info["ECG_R_Peaks"]) / fs
+
+
+# -- sources ------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("sig", SIGNALS)
+def test_finite_source_length_rate_and_exact_timestamps(sig: str) -> None:
+    cfg = SimulatorConfig(seconds=12, rate=100)
+    src = make_source(sig, cfg, t0=50.0)
+    rate = 1.0 if sig == "hr" else 100.0
+    assert src.rate == rate and src.total == round(12 * rate)
+    t, v, _ = take_all(src, [1, 37, 500, 10_000])
+    n = round(12 * rate)
+    assert len(t) == len(v) == n and src.done and src.sent == n
+    np.testing.assert_array_equal(t, 50.0 + np.arange(n) / rate)
+    assert np.all(np.isfinite(v))
+    if sig in NEUROKIT:
+        assert np.ptp(v) > 0.01  # a real waveform, not a constant
+    assert len(src.take(10)) == 0  # a finished source stays finished
+
+
+def test_ramp_is_an_exact_counter() -> None:
+    src = make_source("ramp", SimulatorConfig(seconds=5, rate=130), t0=0.0)
+    _, v, _ = take_all(src, [13] * 50)
+    np.testing.assert_array_equal(v, np.arange(650, dtype=np.float64))
+
+
+@pytest.mark.parametrize("sig", ["ramp", *NEUROKIT])
+def test_continuous_source_keeps_index_and_timestamps_across_segments(sig: str) -> None:
+    cfg = SimulatorConfig(seconds=0, rate=50, segment_seconds=20)
+    assert cfg.continuous
+    src = make_source(sig, cfg, t0=1.0)
+    sizes = [7, 333, 1, 1200, 59, 1000, 400]  # 3000 samples = 60 s, three segments or more
+    t, v, _ = take_all(src, sizes)
+    assert src.total is None and not src.done and len(v) == sum(sizes)
+    np.testing.assert_array_equal(t, 1.0 + np.arange(3000) / 50.0)
+    assert np.all(np.isfinite(v))
+    if sig == "ramp":
+        np.testing.assert_array_equal(v, np.arange(3000))
+    else:
+        assert len(src._values.joints) >= 2  # the test really crossed segment joints
+
+
+def test_same_seed_same_signal_regardless_of_block_sizes() -> None:
+    cfg = SimulatorConfig(seconds=0, rate=50, segment_seconds=20, seed=7)
+    _, a, _ = take_all(make_source("ecg", cfg), [3000])
+    _, b, _ = take_all(make_source("ecg", cfg), [1] * 13 + [987, 2000])
+    np.testing.assert_array_equal(a, b)
+    _, c, _ = take_all(make_source("ecg", SimulatorConfig(seconds=0, rate=50, segment_seconds=20, seed=8)),
+                       [3000])
+    assert not np.allclose(a, c)
+
+
+def test_ecg_rhythm_carries_on_across_segment_joints() -> None:
+    """Splice points are chosen so no beat is doubled or skipped; the check itself is shown
+    to catch the naive alternative (plain concatenation of the same segments)."""
+    fs, bpm = 130, 70
+    cfg = SimulatorConfig(seconds=0, rate=fs, bpm=bpm, segment_seconds=20, seed=42)
+    src = make_source("ecg", cfg)
+    _, ecg, _ = take_all(src, [65 * fs])
+    joints = src._values.joints
+    assert len(joints) >= 3
+    nominal = 60.0 / bpm
+
+    def regular(x: np.ndarray) -> bool:
+        rr = r_peak_intervals(x, fs)
+        return bool(np.all(np.abs(rr - nominal) < 0.15 * nominal))
+
+    assert regular(ecg)
+    naive = np.concatenate([neurokit_segment("ecg", cfg, 20 * fs, seed) for seed in (42, 43, 44)])
+    assert not regular(naive)
+
+
+@pytest.mark.parametrize("sig", NEUROKIT)
+def test_segment_joints_have_no_step(sig: str) -> None:
+    cfg = SimulatorConfig(seconds=0, rate=130, segment_seconds=20)
+    src = make_source(sig, cfg)
+    _, x, _ = take_all(src, [65 * 130])
+    step = np.abs(np.diff(x))
+    typical = np.percentile(step, 99)
+    joints = [j for j in src._values.joints if j + 3 < len(x)]
+    assert len(joints) >= 3
+    for j in joints:
+        assert step[j - 3: j + 3].max() <= typical, (sig, j)
+
+
+def test_hr_stream_is_1hz_and_reports_the_ecg_rate() -> None:
+    cfg = SimulatorConfig(seconds=40, rate=130, bpm=84)
+    hr = make_source("hr", cfg, t0=10.0)
+    t, v, _ = take_all(hr, [1, 1, 100])
+    np.testing.assert_array_equal(t, 10.0 + np.arange(40))
+    assert np.all(v == np.round(v))  # whole bpm, as a strap sends
+    assert v[0] == v[1] == 84  # configured bpm until there are beats to average
+    _, ecg, _ = take_all(make_source("ecg", cfg), [40 * 130])
+    actual = 60.0 / np.mean(r_peak_intervals(ecg, 130))
+    assert abs(actual - 84) < 3
+    assert abs(np.mean(v[5:]) - actual) < 1.0
+    assert np.all(np.abs(v[5:] - actual) <= 4)
+
+
+def test_hr_is_derived_from_the_very_ecg_the_ecg_stream_sends() -> None:
+    cfg = SimulatorConfig(seconds=0, rate=100, segment_seconds=20, seed=3)
+    _, ecg, _ = take_all(make_source("ecg", cfg), [5000])
+    np.testing.assert_array_equal(HeartRateValues(cfg).ecg.values(0, 5000), ecg)
+
+
+# -- pacing on a fake clock ------------------------------------------------------------
+
+
+class FakeClock:
+    def __init__(self, now: float) -> None:
+        self.now = now
+        self.sleeps: list[float] = []
+
+    def __call__(self) -> float:
+        return self.now
+
+    def sleep(self, dt: float) -> None:
+        assert dt > 0
+        self.sleeps.append(dt)
+        self.now += dt
+
+
+def test_pacer_sends_whole_chunks_when_their_last_sample_is_due() -> None:
+    cfg = SimulatorConfig(seconds=3, rate=10)
+    start = 100.0
+    sources = {"ramp": make_source("ramp", cfg, t0=start), "hr": make_source("hr", cfg, t0=start)}
+    pacer = Pacer(sources, chunk=4, start=start)
+    clock = FakeClock(start)
+    sent: list[tuple[float, str, int, int]] = []
+
+    def emit(key: str, block: Block) -> None:
+        assert block.timestamps[-1] <= clock.now + 1e-9  # never a sample from the future
+        sent.append((clock.now, key, block.first, len(block)))
+
+    assert run_paced(pacer, clock, clock.sleep, emit, lambda: False, max_sleep=0.25) is True
+    ramp = [(round(t - start, 6), first, n) for t, k, first, n in sent if k == "ramp"]
+    expected = [(round((first + 3) / 10, 6), first, 4) for first in range(0, 28, 4)] + [(2.9, 28, 2)]
+    assert ramp == expected  # 30 samples: seven chunks of 4, then the last 2 at sample 29's time
+    hr = [(round(t - start, 6), first, n) for t, k, first, n in sent if k == "hr"]
+    assert hr == [(0.0, 0, 1), (1.0, 1, 1), (2.0, 2, 1)]
+    assert max(clock.sleeps) <= 0.25 and clock.now == pytest.approx(start + 2.9)
+
+
+def test_pacer_catches_up_after_a_stall_without_losing_samples() -> None:
+    src = make_source("ramp", SimulatorConfig(seconds=0, rate=100), t0=0.0)
+    pacer = Pacer({"ramp": src}, chunk=10, start=0.0)
+    assert pacer.due(0.085) == []  # sample 9 not measured yet
+    first = pacer.due(0.09)
+    assert [(k, b.first, len(b)) for k, b in first] == [("ramp", 0, 10)]
+    late = pacer.due(1.0)  # the process stalled for ~0.9 s
+    assert [len(b) for _, b in late] == [10] * 9  # samples 10..99, still one chunk per push
+    values = np.concatenate([b.values for _, b in first + late])
+    np.testing.assert_array_equal(values, np.arange(100))
+    assert pacer.next_due() == pytest.approx(1.09)
+
+
+def test_run_paced_stops_on_request() -> None:
+    src = make_source("ramp", SimulatorConfig(seconds=0, rate=50), t0=0.0)
+    clock = FakeClock(0.0)
+    got: list[int] = []
+    finished = run_paced(Pacer({"ramp": src}, 5, 0.0), clock, clock.sleep,
+                         lambda _k, b: got.extend(b.values.astype(int)), lambda: clock.now >= 2.0)
+    assert finished is False
+    assert got == list(range(len(got))) and 95 <= len(got) <= 105
+
+
+def test_pacer_rejects_empty_chunks() -> None:
+    with pytest.raises(ValueError, match="chunk must be >= 1"):
+        Pacer({}, 0, 0.0)
+
+
+# -- options and naming --------------------------------------------------------------------
+
+
+def test_defaults_and_stream_specs_look_like_a_polar_strap() -> None:
+    opts = options_from_mapping({})
+    assert opts.signals == ("ecg", "hr") and opts.sim.rate == 130 and opts.chunk_samples == 13
+    assert opts.sim.seconds == 60 and opts.device_id == "SIM0001"
+    ecg = stream_spec("ecg", opts.sim, "DEV1")
+    assert (ecg.name, ecg.type, ecg.nominal_rate, ecg.channel_count, ecg.dtype, ecg.source_id,
+            ecg.channels) == ("PolarH10/DEV1/ECG", "ECG", 130, 1, "float64", "DEV1-ECG", ("ECG",))
+    hr = stream_spec("hr", opts.sim, "DEV1", prefix="t/x/")
+    assert (hr.name, hr.nominal_rate) == ("t/x/PolarH10/DEV1/HR", 1.0)
+    assert stream_spec("ppg", opts.sim, "D").name == "PolarOH1/D/PPG"
+    for sig, kind in (("eda", "EDA"), ("emg", "EMG"), ("rsp", "RSP"), ("ramp", "RAMP")):
+        assert stream_spec(sig, opts.sim, "D").name == f"NeuroKitSim/D/{kind}"
+
+
+def test_options_from_yaml_style_mapping() -> None:
+    opts = options_from_mapping({"continuous": True, "signals": ["ramp", "ECG", "ramp"], "rate": 250,
+                                 "device-id": "H10X", "chunk": 25, "scr": 2.0, "name_prefix": "/p/"})
+    assert opts.sim.continuous and opts.signals == ("ramp", "ecg") and opts.sim.scr == 2
+    assert opts.device_id == "H10X" and opts.chunk_samples == 25 and opts.name_prefix == "p"
+
+
+@pytest.mark.parametrize(
+    "values,message",
+    [
+        ({"rate": -5}, "rate must be > 0"),
+        ({"seconds": -1}, "seconds must be >= 0"),
+        ({"signals": "ecg,pulse"}, "unknown signal(s) pulse"),
+        ({"signals": ""}, "no signal chosen"),
+        ({"heart_rate": 70}, "unknown option(s) heart_rate"),
+        ({"bpm": "fast"}, "option 'bpm' must be a number"),
+        ({"bpm": True}, "option 'bpm' must be a number"),
+        ({"scr": 2.5}, "option 'scr' must be a whole number"),
+        ({"bpm": 500}, "bpm must be between 20 and 250"),
+        ({"resp": 0}, "resp must be between 1 and 60"),
+        ({"chunk": -1}, "chunk must be >= 1"),
+        ({"device_id": "a/b"}, "device_id must be"),
+        ({"continuous": "yes"}, "'continuous' must be true or false"),
+        ({"signals": "emg", "bnum": 70}, "EMG bursts of 1 s do not fit"),
+        ({"rate": 5}, "rate must be >= 20 Hz for NeuroKit2 signals"),
+    ],
+)
+def test_bad_options_are_refused_with_a_clear_message(values: dict, message: str) -> None:
+    with pytest.raises(ValueError) as err:
+        options_from_mapping(values)
+    assert message in str(err.value)
+
+
+def test_ramp_only_may_run_slow() -> None:
+    assert options_from_mapping({"rate": 5, "signals": "ramp"}).sim.rate == 5
+
+
+def test_unknown_signal_source() -> None:
+    with pytest.raises(ValueError, match="unknown signal 'ecgg'"):
+        make_source("ecgg", SimulatorConfig())
+
+
+# -- the CLI over real LSL -----------------------------------------------------------------
+
+KINDS = {"ramp": "NeuroKitSim/DEV42/RAMP", "ecg": "PolarH10/DEV42/ECG", "hr": "PolarH10/DEV42/HR",
+         "ppg": "PolarOH1/DEV42/PPG", "eda": "NeuroKitSim/DEV42/EDA", "emg": "NeuroKitSim/DEV42/EMG",
+         "rsp": "NeuroKitSim/DEV42/RSP"}
+
+
+def pull(inlet: pylsl.StreamInlet, expected: int, timeout: float = 15.0) -> tuple[np.ndarray, np.ndarray]:
+    """Everything the inlet gets until ``expected`` samples are in (and any surplus)."""
+    values: list[float] = []
+    stamps: list[float] = []
+    deadline = time.monotonic() + timeout
+    while len(stamps) < expected and time.monotonic() < deadline:
+        data, ts = inlet.pull_chunk(timeout=0.05, max_samples=10_000)
+        values.extend(row[0] for row in data)
+        stamps.extend(ts)
+    data, ts = inlet.pull_chunk(timeout=0.0, max_samples=10_000)  # a surplus would be a bug
+    values.extend(row[0] for row in data)
+    stamps.extend(ts)
+    return np.array(values), np.array(stamps)
+
+
+def test_cli_streams_named_like_a_polar_strap_and_the_ramp_arrives_complete(lsl_name: str) -> None:
+    with NodeProcess(
+        "physio_simulator", "--seconds", "3", "--rate", "100", "--signals", ",".join(KINDS),
+        "--device-id", "DEV42", "--name-prefix", lsl_name, "--chunk", "10", "--wait-for-consumers", "30",
+    ) as sim:
+        sim.wait_for_output("streaming", timeout=30)
+        found = pylsl.resolve_bypred(f"starts-with(name,'{lsl_name}/')", len(KINDS), 20)
+        by_name = {info.name(): info for info in found}
+        assert sorted(by_name) == sorted(f"{lsl_name}/{kind}" for kind in KINDS.values()), sim.output
+        inlets = {sig: pylsl.StreamInlet(by_name[f"{lsl_name}/{kind}"], max_buflen=60)
+                  for sig, kind in KINDS.items()}
+        for inlet in inlets.values():
+            inlet.open_stream(10)
+        infos = {sig: inlet.info(5) for sig, inlet in inlets.items()}
+        got = {sig: pull(inlet, 3 if sig == "hr" else 300) for sig, inlet in inlets.items()}
+        assert sim.wait(30) == 0, sim.output
+    for sig, info in infos.items():
+        kind = KINDS[sig].rsplit("/", 1)[1]
+        assert info.type() == kind and info.channel_count() == 1
+        assert info.channel_format() == pylsl.cf_double64
+        assert info.nominal_srate() == (1.0 if sig == "hr" else 100.0)
+        assert info.source_id() == f"DEV42-{kind}"
+        assert info.desc().child("channels").child("channel").child_value("label") == kind
+    ramp, stamps = got["ramp"]
+    np.testing.assert_array_equal(ramp, np.arange(300))  # complete, in order, no repeats
+    t0 = stamps[0]
+    np.testing.assert_allclose(stamps, t0 + np.arange(300) / 100.0, rtol=0, atol=1e-9)
+    assert abs(t0 - pylsl.local_clock()) < 30  # on this machine's LSL clock
+    for sig in ("ecg", "ppg", "eda", "emg", "rsp"):
+        values, ts = got[sig]
+        assert len(values) == 300 and np.ptp(values) > 0, sig
+        np.testing.assert_allclose(ts, stamps, rtol=0, atol=1e-9)  # one clock for all streams
+    hr, hr_t = got["hr"]
+    assert len(hr) == 3 and np.all((hr > 50) & (hr < 90))
+    np.testing.assert_allclose(hr_t, t0 + np.arange(3), rtol=0, atol=1e-9)
+    assert "done: sent ramp: 300, ecg: 300, hr: 3, ppg: 300" in sim.output
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_cli_stops_cleanly_on_a_signal_in_continuous_mode(lsl_name: str, sig: signal.Signals) -> None:
+    with NodeProcess("physio_simulator", "--continuous", "--signals", "ramp,hr", "--rate", "50",
+                     "--name-prefix", lsl_name) as sim:
+        sim.wait_for_output("until stopped", timeout=30)
+        found = pylsl.resolve_byprop("name", f"{lsl_name}/NeuroKitSim/SIM0001/RAMP", 1, 20)
+        assert found, sim.output
+        inlet = pylsl.StreamInlet(found[0])
+        inlet.open_stream(10)
+        sample, _ = inlet.pull_sample(timeout=10.0)
+        assert sample is not None, "no samples before the stop"
+        assert sim.stop(sig) == 0, sim.output
+    assert f"{sig.name}: stopping" in sim.output and "done: sent ramp: " in sim.output
+    assert "Traceback" not in sim.output
+
+
+@pytest.mark.parametrize(
+    "args,conf,message",
+    [
+        (["--rate", "-5"], None, "rate must be > 0"),
+        (["--signals", "ecg,pulse"], None, "unknown signal(s) pulse"),
+        (["--chunk", "-3"], None, "chunk must be >= 1"),
+        (["--bpm", "fast"], None, "argument --bpm: invalid float value"),
+        ([], "bpm: [70\n", "is not valid YAML at line"),
+        ([], "heart_rate: 70\n", "unknown option(s) heart_rate"),
+        ([], "- 1\n- 2\n", "must hold key: value pairs"),
+    ],
+)
+def test_cli_bad_input_gives_one_clear_message(tmp_path: Path, args: list[str], conf: str | None,
+                                               message: str) -> None:
+    if conf is not None:
+        path = tmp_path / "sim.yaml"
+        path.write_text(conf)
+        args = [*args, "--conf", str(path)]
+    with NodeProcess("physio_simulator", *args) as sim:
+        assert sim.wait(30) == 2, sim.output
+    assert message in sim.output and "Traceback" not in sim.output, sim.output
+
+
+def test_cli_conf_file_sets_options_and_flags_win(tmp_path: Path, lsl_name: str) -> None:
+    path = tmp_path / "sim.yaml"
+    path.write_text(f"seconds: 1\nsignals: [ramp]\nrate: 80\nname_prefix: {lsl_name}\ndevice-id: CONF1\n")
+    with NodeProcess("physio_simulator", "--conf", str(path), "--rate", "40") as sim:
+        assert sim.wait(30) == 0, sim.output
+    assert f"streaming {lsl_name}/NeuroKitSim/CONF1/RAMP (1 s, 40 Hz" in sim.output
+    assert "done: sent ramp: 40" in sim.output
