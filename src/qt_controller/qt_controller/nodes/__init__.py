@@ -1,0 +1,1 @@
+"""Node shells (rclpy): qt_controller and mock_qt_robot console scripts."""

@@ -1,0 +1,209 @@
+"""In-process robot side for integration tests: mock_qt_robot + qt_controller + a probe, on sim time.
+
+The test drives /clock itself (a few times faster than real time), so every duration the
+tests check is ROS time, exactly as the coach will run this robot side.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from helpers import wait_until
+
+SIM_START = 1000.0
+
+
+class ClockDriver:
+    """Publishes /clock from its own thread: ``step`` sim seconds every ``period`` wall seconds."""
+
+    def __init__(self, context: Any, step: float = 1 / 60, period: float = 0.005) -> None:
+        from rclpy.node import Node
+        from rosgraph_msgs.msg import Clock
+
+        self._clock_msg = Clock
+        self.node = Node("test_clock", context=context)
+        self.pub = self.node.create_publisher(Clock, "/clock", 10)
+        self.step, self.period = step, period
+        self.t = SIM_START
+        self.running = threading.Event()
+        self.running.set()
+        self._alive = True
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while self._alive:
+            if self.running.is_set():
+                self.t += self.step
+                msg = self._clock_msg()
+                msg.clock.sec = int(self.t)
+                msg.clock.nanosec = min(round((self.t - int(self.t)) * 1e9), 999_999_999)
+                self.pub.publish(msg)
+            time.sleep(self.period)
+
+    def close(self) -> None:
+        self._alive = False
+        self._thread.join(2.0)
+        self.node.destroy_node()
+
+
+class Probe:
+    """Sends command lines and collects replies, mock events and joint states (with receipt sim time)."""
+
+    def __init__(self, context: Any, use_sim_time: bool = True) -> None:
+        from rclpy.node import Node
+        from rclpy.parameter import Parameter
+        from sensor_msgs.msg import JointState
+        from std_msgs.msg import String
+
+        self._string = String
+        self.node = Node("test_probe", context=context,
+                         parameter_overrides=[Parameter("use_sim_time", Parameter.Type.BOOL, use_sim_time)])
+        self.lock = threading.Lock()
+        self.replies: list[dict[str, Any]] = []
+        self.events: list[dict[str, Any]] = []
+        self.joints: list[tuple[float, dict[str, float]]] = []
+        self.input = self.node.create_publisher(String, "/QtController/input", 50)
+        self.output_sub = self.node.create_subscription(String, "/QtController/output", self._on_reply, 50)
+        self.events_sub = self.node.create_subscription(String, "/qt_robot/mock/events", self._on_event, 200)
+        self.node.create_subscription(JointState, "/qt_robot/joints/state", self._on_joints, 100)
+
+    def now(self) -> float:
+        return self.node.get_clock().now().nanoseconds * 1e-9
+
+    def _on_reply(self, msg: Any) -> None:
+        with self.lock:
+            self.replies.append(json.loads(msg.data))
+
+    def _on_event(self, msg: Any) -> None:
+        event = json.loads(msg.data)
+        event["received"] = self.now()
+        with self.lock:
+            self.events.append(event)
+
+    def _on_joints(self, msg: Any) -> None:
+        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        with self.lock:
+            self.joints.append((stamp, dict(zip(msg.name, msg.position, strict=True))))
+
+    def connected(self) -> bool:
+        return self.input.get_subscription_count() > 0 and self.output_sub.get_publisher_count() > 0
+
+    def send(self, line: str, timeout: float = 20.0) -> dict[str, Any]:
+        """Publish one command and return its reply (commands are answered in order)."""
+        with self.lock:
+            n = len(self.replies)
+        self.input.publish(self._string(data=line))
+        wait_until(lambda: len(self.replies) > n, timeout, f"a reply to {line!r}")
+        with self.lock:
+            reply = self.replies[n]
+        assert reply["command"] == line.strip(), reply
+        return reply
+
+    def events_of(self, kind: str, **match: Any) -> list[dict[str, Any]]:
+        with self.lock:
+            return [e for e in self.events if e["event"] == kind
+                    and all(e.get(k) == v for k, v in match.items())]
+
+    def wait_event(self, kind: str, timeout: float = 20.0, **match: Any) -> dict[str, Any]:
+        wait_until(lambda: self.events_of(kind, **match), timeout,
+                   lambda: f"event {kind} {match}; got {[e['event'] for e in self.events]}")
+        return self.events_of(kind, **match)[0]
+
+    def clear(self) -> None:
+        with self.lock:
+            self.events.clear()
+            self.joints.clear()
+
+
+class RobotSide:
+    """mock_qt_robot + qt_controller (+ probe and /clock) on one executor in this process."""
+
+    def __init__(self, context: Any, mock_options: dict[str, Any],
+                 controller_options: dict[str, Any]) -> None:
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.parameter import Parameter
+
+        from qt_controller.nodes.mock_qt_robot import MockQtRobotNode
+        from qt_controller.nodes.qt_controller import QtControllerNode
+
+        sim = [Parameter("use_sim_time", Parameter.Type.BOOL, True)]
+        self.clock = ClockDriver(context)
+        self.mock = MockQtRobotNode(mock_options, context=context, parameter_overrides=sim)
+        self.controller = QtControllerNode(controller_options, context=context, parameter_overrides=sim)
+        self.probe = Probe(context)
+        self.executor = SingleThreadedExecutor(context=context)
+        for node in (self.mock, self.controller, self.probe.node):
+            self.executor.add_node(node)
+        self._spinning = True
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread.start()
+        self.controller.start()
+        wait_until(self.probe.connected, 20, "the probe to discover qt_controller")
+        wait_until(lambda: self.mock._now() > SIM_START and self.probe.now() > SIM_START, 20, "sim time")
+        for client in self.controller.robot._services.values():
+            assert client.wait_available(20), f"{client.spec.name} not available"
+
+    def _spin(self) -> None:
+        while self._spinning:
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def close(self) -> None:
+        self.controller.stop()
+        self._spinning = False
+        self._thread.join(5.0)
+        self.executor.shutdown(timeout_sec=1.0)
+        for node in (self.controller, self.mock, self.probe.node):
+            node.destroy_node()
+        self.clock.close()
+
+
+SHORT_GESTURE = """<gesture><name>test_blink</name><joints><joint>HeadPitch</joint></joints><points>
+<point time="0">0</point><point time="0.25">10</point><point time="0.5">0</point></points></gesture>"""
+
+
+@pytest.fixture
+def robot_side(ros_context: Any, tmp_path: Path) -> Iterator[RobotSide]:
+    (tmp_path / "test_blink.xml").write_text(SHORT_GESTURE)
+    side = RobotSide(
+        ros_context,
+        {"gesture_dirs": [str(tmp_path)], "emotion_seconds": 2.0, "speech_seconds_per_char": 0.05},
+        {"service_timeout": 10.0},
+    )
+    try:
+        yield side
+    finally:
+        side.close()
+
+
+@pytest.fixture
+def wall_probe(ros_context: Any) -> Iterator[Probe]:
+    """A probe on wall time, spinning on its own thread (for node subprocesses)."""
+    from rclpy.executors import SingleThreadedExecutor
+
+    probe = Probe(ros_context, use_sim_time=False)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(probe.node)
+    running = threading.Event()
+    running.set()
+
+    def spin() -> None:
+        while running.is_set():
+            executor.spin_once(timeout_sec=0.05)
+
+    thread = threading.Thread(target=spin, daemon=True)
+    thread.start()
+    try:
+        yield probe
+    finally:
+        running.clear()
+        thread.join(2.0)
+        executor.shutdown(timeout_sec=1.0)
+        probe.node.destroy_node()

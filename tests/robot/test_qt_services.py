@@ -1,0 +1,134 @@
+"""The QT service adapter: backend choice, request checking and the std-only JSON request/reply."""
+
+from __future__ import annotations
+
+import json
+import sys
+import threading
+import types
+from typing import Any
+
+import pytest
+
+from helpers import wait_until
+from qt_controller import qt_services as qs
+from qt_controller.robot_interface import Outcome
+
+
+def test_backend_is_json_without_qt_packages_and_qt_is_refused() -> None:
+    assert qs.find_qt_type(qs.GESTURE_PLAY) is None
+    assert qs.resolve_backend("auto", qs.GESTURE_PLAY) == "json"
+    assert qs.resolve_backend("json", qs.SET_VOLUME) == "json"
+    with pytest.raises(ValueError, match=r"needs qt_gesture_controller\.srv"):
+        qs.resolve_backend("qt", qs.GESTURE_PLAY)
+    with pytest.raises(ValueError, match="must be one of"):
+        qs.resolve_backend("ros1", qs.GESTURE_PLAY)
+
+
+@pytest.mark.parametrize("class_name", ["GesturePlay", "gesture_play"])
+def test_qt_types_are_used_when_importable(monkeypatch: pytest.MonkeyPatch, class_name: str) -> None:
+    srv = types.ModuleType("qt_gesture_controller.srv")
+    marker = type(class_name, (), {})
+    setattr(srv, class_name, marker)
+    monkeypatch.setitem(sys.modules, "qt_gesture_controller", types.ModuleType("qt_gesture_controller"))
+    monkeypatch.setitem(sys.modules, "qt_gesture_controller.srv", srv)
+    assert qs.find_qt_type(qs.GESTURE_PLAY) is marker
+    assert qs.resolve_backend("auto", qs.GESTURE_PLAY) == "qt"
+    assert qs.resolve_backend("json", qs.GESTURE_PLAY) == "json"  # can still be forced
+
+
+def test_coerce_request_checks_fields_and_types() -> None:
+    assert qs.coerce_request(qs.GESTURE_PLAY, {"id": "x", "name": "base", "speed": 1}) == {
+        "name": "base", "speed": 1.0}
+    assert qs.coerce_request(qs.SET_VOLUME, {"volume": 40.0}) == {"volume": 40}
+    assert qs.coerce_request(qs.SET_VELOCITY, {"parts": ["head"], "velocity": 5}) == {
+        "parts": ["head"], "velocity": 5}
+    for spec, request, fragment in [
+        (qs.GESTURE_PLAY, {"name": "base"}, "missing field 'speed'"),
+        (qs.GESTURE_PLAY, {"name": 3, "speed": 1.0}, "field 'name' must be str"),
+        (qs.GESTURE_PLAY, {"name": "base", "speed": True}, "field 'speed' must be float"),
+        (qs.SET_VOLUME, {"volume": 40.5}, "field 'volume' must be int"),
+        (qs.SET_VELOCITY, {"parts": [1], "velocity": 5}, "list of strings"),
+    ]:
+        with pytest.raises(ValueError, match=fragment):
+            qs.coerce_request(spec, request)
+
+
+class _Spinner:
+    def __init__(self, context: Any, *nodes: Any) -> None:
+        from rclpy.executors import SingleThreadedExecutor
+
+        self.executor = SingleThreadedExecutor(context=context)
+        for n in nodes:
+            self.executor.add_node(n)
+        self.running = True
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.thread.start()
+
+    def _spin(self) -> None:
+        while self.running:
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def close(self) -> None:
+        self.running = False
+        self.thread.join(2)
+        self.executor.shutdown(timeout_sec=1)
+
+
+@pytest.mark.ros
+def test_json_request_reply_roundtrip_shared_server_and_errors(ros_context: Any) -> None:
+    from rclpy.node import Node
+    from std_msgs.msg import String
+
+    server_node = Node("test_server", context=ros_context)
+    client_node = Node("test_clients", context=ros_context)
+    seen: list[dict[str, Any]] = []
+
+    def handler(fields: dict[str, Any]) -> Outcome:
+        seen.append(fields)
+        if fields["name"] == "bad":
+            return Outcome.failure("unknown gesture 'bad'")
+        return Outcome.success(f"playing {fields['name']}")
+
+    qs.ServiceServer(server_node, qs.GESTURE_PLAY, handler, "json")
+    a = qs.ServiceClient(client_node, qs.GESTURE_PLAY, "json")
+    b = qs.ServiceClient(client_node, qs.GESTURE_PLAY, "json")
+    missing = qs.ServiceClient(client_node, qs.SET_VOLUME, "json")
+    raw_replies: list[dict[str, Any]] = []
+    client_node.create_subscription(String, "/qt_robot/gesture/play/reply",
+                                    lambda m: raw_replies.append(json.loads(m.data)), 10)
+    raw = client_node.create_publisher(String, "/qt_robot/gesture/play/request", 10)
+    spinner = _Spinner(ros_context, server_node, client_node)
+    try:
+        assert a.wait_available(20) and b.wait_available(20)
+        results: dict[str, Outcome] = {}
+
+        def call(key: str, client: qs.ServiceClient) -> None:
+            results[key] = client.call(10, name=key, speed=1.5)
+
+        threads = [threading.Thread(target=call, args=kc) for kc in (("one", a), ("two", b), ("bad", a))]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(15)
+        assert results["one"] == Outcome(True, "playing one")  # each caller got its own answer
+        assert results["two"] == Outcome(True, "playing two")
+        assert not results["bad"].ok
+        assert results["bad"].message == "/qt_robot/gesture/play answered status false: unknown gesture 'bad'"
+        assert sorted(f["name"] for f in seen) == ["bad", "one", "two"]
+        assert all(f["speed"] == 1.5 for f in seen)
+
+        n = len(raw_replies)
+        raw.publish(String(data=json.dumps({"id": "r1", "name": "x"})))  # no speed
+        raw.publish(String(data="not json"))  # ignored: no id to answer
+        wait_until(lambda: any(r["id"] == "r1" for r in raw_replies[n:]), 20, "the reply to r1")
+        r1 = next(r for r in raw_replies[n:] if r["id"] == "r1")
+        assert r1["status"] is False and r1["message"] == "bad request: missing field 'speed'"
+        assert isinstance(r1["t"], float)
+
+        nobody = missing.call(0.3, volume=10)
+        assert not nobody.ok and "/qt_robot/setting/setVolume is not available" in nobody.message
+    finally:
+        spinner.close()
+        client_node.destroy_node()
+        server_node.destroy_node()
