@@ -1,0 +1,143 @@
+"""What the recorder does, without rclpy: choose topics, register them, count, report.
+
+The node shell polls the ROS graph and hands this class ``(topic, [types])`` lists and the
+publishers' offered QoS/type hashes; it creates the raw subscriptions this class asks for
+and passes every received buffer to :meth:`RecordingSession.on_message`.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from typing import Any
+
+from hri_physio_bridge.bag.errors import BagError
+from hri_physio_bridge.bag.metadata import HASH_RE, BagInfo
+from hri_physio_bridge.bag.msgdefs import (
+    UnknownTypeError,
+    import_message_type,
+    installed_type_hash,
+    message_definition,
+)
+from hri_physio_bridge.bag.topics import TopicSelector
+from hri_physio_bridge.bag.writer import BagWriter
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A topic to subscribe to: its name, type name and generated Python class."""
+
+    topic: str
+    type_name: str
+    msg_class: Any
+
+
+class RecordingSession:
+    def __init__(
+        self,
+        writer: BagWriter,
+        selector: TopicSelector,
+        log: logging.Logger,
+        *,
+        import_type: Callable[[str], Any] = import_message_type,
+        definition: Callable[[str], str] = message_definition,
+        wall_ns: Callable[[], int] = time.time_ns,
+    ) -> None:
+        self.writer = writer
+        self.selector = selector
+        self.log = log
+        self._import = import_type
+        self._definition = definition
+        self._wall_ns = wall_ns
+        self.recording: dict[str, str] = {}
+        self.skipped: dict[str, str] = {}
+        self._last_report = (0, 0)
+
+    # -- discovery -----------------------------------------------------------
+    def _skip(self, topic: str, reason: str) -> None:
+        if self.skipped.get(topic) != reason:
+            self.skipped[topic] = reason
+            self.log.warning(f"not recording {topic}: {reason}")
+
+    def candidates(self, graph: Iterable[tuple[str, list[str]]]) -> list[Candidate]:
+        """Selected topics not yet recorded that can be (each skip is reported once)."""
+        out = []
+        for topic, types in graph:
+            if topic in self.recording or not self.selector.selects(topic):
+                continue
+            if len(types) != 1:
+                self._skip(topic, f"it carries {len(types)} types ({', '.join(types)}); a bag topic has one")
+                continue
+            try:
+                cls = self._import(types[0])
+            except UnknownTypeError as exc:
+                self._skip(topic, f"{exc}; install its interface package to record it")
+                continue
+            out.append(Candidate(topic, types[0], cls))
+        return out
+
+    def start_topic(
+        self, cand: Candidate, offered_qos: list[dict[str, Any]], graph_hashes: Iterable[str]
+    ) -> bool:
+        """Register ``cand`` in the bag; False (and a logged reason) if it cannot be."""
+        try:
+            definition = self._definition(cand.type_name)
+        except UnknownTypeError as exc:
+            self._skip(cand.topic, str(exc))
+            return False
+        installed = installed_type_hash(cand.type_name)
+        offered = sorted({h for h in graph_hashes if HASH_RE.match(h)})
+        if len(offered) > 1:
+            self._skip(cand.topic, f"publishers offer different type hashes {offered}")
+            return False
+        type_hash = offered[0] if offered else (installed or "")
+        if offered and installed and offered[0] != installed:
+            self.log.warning(
+                f"{cand.topic}: publishers' {cand.type_name} hash {offered[0]} differs from the installed "
+                f"definition's {installed}; recording the publishers' hash"
+            )
+        if not type_hash:
+            self.log.warning(f"{cand.topic}: no type description hash known for {cand.type_name}")
+        try:
+            self.writer.add_topic(cand.topic, cand.type_name, definition, type_hash, offered_qos)
+        except BagError as exc:
+            self._skip(cand.topic, str(exc))
+            return False
+        self.recording[cand.topic] = cand.type_name
+        self.skipped.pop(cand.topic, None)
+        qos = offered_qos[0] if offered_qos else {}
+        self.log.info(
+            f"recording {cand.topic} [{cand.type_name}] from {len(offered_qos)} publisher(s), "
+            f"{qos.get('reliability', '?')}/{qos.get('durability', '?')}"
+        )
+        return True
+
+    # -- messages ------------------------------------------------------------
+    def on_message(self, topic: str, data: bytes, info: dict[str, Any] | None = None) -> None:
+        """One raw message; stamped with the middleware's receive time (ns) when known."""
+        received = int(info.get("received_timestamp") or 0) if info else 0
+        source = int(info.get("source_timestamp") or 0) if info else 0
+        seq = int(info.get("publication_sequence_number") or 0) if info else 0
+        self.writer.write(topic, received or self._wall_ns(), data, source, seq)
+
+    # -- reporting -----------------------------------------------------------
+    def status(self, interval: float | None = None) -> str:
+        st = self.writer.stats
+        text = (
+            f"{len(self.recording)} topic(s) recorded, {len(self.skipped)} skipped; "
+            f"{st.messages} messages, {st.bytes / 1e6:.2f} MB payload, file {st.file_bytes / 1e6:.2f} MB, "
+            f"{st.chunks_flushed} chunks flushed"
+        )
+        if interval:
+            dm = st.messages - self._last_report[0]
+            db = st.bytes - self._last_report[1]
+            text += f"; {dm / interval:.0f} msg/s, {db / interval / 1e6:.2f} MB/s"
+        self._last_report = (st.messages, st.bytes)
+        return text
+
+    def summary_lines(self, info: BagInfo) -> list[str]:
+        lines = [f"{t.name} [{t.type}]: {t.message_count} messages" for t in info.topics]
+        lines += [f"{topic}: skipped ({why})" for topic, why in sorted(self.skipped.items())]
+        return lines

@@ -1,0 +1,131 @@
+"""Reading and repairing bags whose writer died: every truncation point, damaged chunks."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+from bagkit import check_bag, default_qos, read_with_rosbags, serialize
+from std_msgs.msg import String
+
+from hri_physio_bridge.bag.errors import BagError
+from hri_physio_bridge.bag.msgdefs import installed_type_hash, message_definition
+from hri_physio_bridge.bag.reader import BagReader
+from hri_physio_bridge.bag.recovery import McapScanner, repair_bag
+from hri_physio_bridge.bag.writer import BagWriter
+
+T0 = 1_700_000_000_000_000_000
+TN = "std_msgs/msg/String"
+
+
+def _killed_bag(path: Path, n: int = 60, per_chunk: int = 10) -> BagWriter:
+    """A bag whose writer flushed a chunk every ``per_chunk`` messages and then 'died'."""
+    writer = BagWriter(path, fsync_period=None, custom_data={"session_id": "P007"})
+    writer.add_topic("/count", TN, message_definition(TN), installed_type_hash(TN) or "", [default_qos()])
+    for i in range(n):
+        writer.write("/count", T0 + i * 1_000_000, serialize(String(data=str(i))))
+        if (i + 1) % per_chunk == 0:
+            writer.flush(fsync=False)
+    writer.abort()
+    return writer
+
+
+def _values(path: Path) -> list[int]:
+    from rclpy.serialization import deserialize_message
+
+    return [int(deserialize_message(m.data, String).data) for _c, _s, m in McapScanner(path).messages()]
+
+
+def test_every_truncation_point_recovers_a_prefix(tmp_path: Path) -> None:
+    """Cut the file at every 7th byte: the scan never fails, and yields whole chunks in order."""
+    writer = _killed_bag(tmp_path / "k", n=40, per_chunk=10)
+    data = writer.path.read_bytes()
+    assert _values(writer.path) == list(range(40))
+    seen_counts = set()
+    cut = tmp_path / "cut.mcap"
+    for size in range(8, len(data), 7):
+        cut.write_bytes(data[:size])
+        got = _values(cut)
+        assert got == list(range(len(got))), size  # a prefix, in order, no duplicates
+        assert len(got) % 10 == 0  # only complete chunks
+        seen_counts.add(len(got))
+    assert seen_counts == {0, 10, 20, 30, 40}
+
+
+def test_damaged_chunk_is_skipped_and_the_rest_recovered(tmp_path: Path) -> None:
+    writer = _killed_bag(tmp_path / "k", n=30, per_chunk=10)
+    data = bytearray(writer.path.read_bytes())
+    # find the second chunk record (opcode 0x06) and flip bytes in its compressed payload
+    chunk_offsets = [o for _c, _s, o in _record_offsets(bytes(data)) if _c == 0x06]
+    assert len(chunk_offsets) == 3
+    start = chunk_offsets[1]
+    data[start + 80 : start + 90] = b"\xff" * 10
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(data))
+    scanner = McapScanner(bad)
+    got = [int(s) for s in (_values(bad))]
+    assert got == list(range(10)) + list(range(20, 30))
+    list(scanner.messages())
+    assert scanner.report.corrupt_chunks == 1
+
+
+def _record_offsets(data: bytes):
+    import struct
+
+    off = 8
+    while off + 9 <= len(data):
+        op, length = struct.unpack_from("<BQ", data, off)
+        yield op, length, off
+        off += 9 + length
+
+
+def test_repair_makes_a_complete_bag(tmp_path: Path) -> None:
+    bag = tmp_path / "k"
+    writer = _killed_bag(bag, n=55, per_chunk=10)  # the last 5 messages died with the process
+    assert not (bag / "metadata.yaml").exists()
+    reader = BagReader(bag)
+    assert not reader.complete and reader.message_count == 50
+    assert "recorder --repair" in reader.warnings[0]
+
+    rep = repair_bag(bag)
+    assert not rep.scan.complete and rep.scan.messages == 50
+    assert rep.backup is not None and rep.backup.exists()
+    meta = check_bag(bag)  # metadata.yaml + summary + hashes, as for a clean bag
+    assert meta["message_count"] == 50
+    assert meta["custom_data"] == {"session_id": "P007", "repaired": "true"}
+    assert [m.data for _, _, m in read_with_rosbags(bag)] == [str(i) for i in range(50)]
+    assert BagReader(bag).complete
+    assert writer.path.exists()
+
+
+def test_repair_of_a_complete_bag_keeps_everything(tmp_path: Path) -> None:
+    bag = tmp_path / "c"
+    writer = BagWriter(bag)
+    writer.add_topic("/a", TN, message_definition(TN), installed_type_hash(TN) or "", [default_qos()])
+    for i in range(12):
+        writer.write("/a", T0 + i, serialize(String(data=str(i))))
+    writer.close()
+    rep = repair_bag(bag, keep_damaged=False)
+    assert rep.scan.complete and rep.backup is None
+    assert check_bag(bag)["message_count"] == 12
+
+
+def test_repair_errors(tmp_path: Path) -> None:
+    with pytest.raises(BagError, match="does not exist"):
+        repair_bag(tmp_path / "none")
+    (tmp_path / "d").mkdir()
+    with pytest.raises(BagError, match=r"no \.mcap"):
+        repair_bag(tmp_path / "d")
+    (tmp_path / "d" / "d_0.mcap").write_bytes(b"garbage!" * 4)
+    with pytest.raises(BagError, match="not an MCAP file"):
+        repair_bag(tmp_path / "d")
+    assert not (tmp_path / "d" / "d_0.mcap.repairing").exists()
+
+
+def test_header_only_bag_reads_as_empty(tmp_path: Path) -> None:
+    writer = BagWriter(tmp_path / "h")
+    writer.abort()
+    copy = tmp_path / "h.mcap"
+    shutil.copy(writer.path, copy)
+    assert BagReader(copy).message_count == 0

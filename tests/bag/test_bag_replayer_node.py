@@ -1,0 +1,189 @@
+"""replayer node end to end: bytes, order, remapping, filtering, offset, /clock, errors."""
+
+from __future__ import annotations
+
+import itertools
+import signal
+import subprocess
+import sys
+import uuid
+from pathlib import Path
+
+import pytest
+from bagkit import RawCollector, default_qos, make_bag, serialize
+from rosgraph_msgs.msg import Clock
+from std_msgs.msg import Float64MultiArray, String
+
+from helpers import NodeProcess, wait_until
+from hri_physio_bridge.bag.writer import BagWriter
+
+pytestmark = [pytest.mark.ros]
+NS = 1_000_000_000
+T0 = 1_700_000_000 * NS
+BIN = Path(sys.prefix) / "bin"
+
+
+@pytest.fixture
+def prefix() -> str:
+    return f"/rptest_{uuid.uuid4().hex[:8]}"
+
+
+@pytest.fixture
+def collector(ros_context):
+    c = RawCollector(ros_context, f"rp_collector_{uuid.uuid4().hex[:6]}")
+    yield c
+    c.close()
+
+
+def _bag(tmp_path: Path, prefix: str) -> tuple[Path, list[bytes], list[bytes]]:
+    msgs = []
+    for i in range(40):
+        msgs.append((f"{prefix}/a", T0 + i * 20_000_000, String(data=f"a{i}")))
+        msgs.append(
+            (f"{prefix}/f", T0 + i * 20_000_000 + 7_000_000, Float64MultiArray(data=[i * 0.5, 1.0, 2.0]))
+        )
+    written = make_bag(tmp_path / "src", msgs)
+    a = [w for (t, _, _), w in zip(msgs, written, strict=True) if t.endswith("/a")]
+    f = [w for (t, _, _), w in zip(msgs, written, strict=True) if t.endswith("/f")]
+    return tmp_path / "src", a, f
+
+
+def _decoded(raw: list[bytes], msg_type: type) -> list:
+    """Messages as values: DDS may append up to 3 bytes of alignment padding on the wire."""
+    from rclpy.serialization import deserialize_message
+
+    return [deserialize_message(b, msg_type) for b in raw]
+
+
+def _replay(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
+    return subprocess.run([str(BIN / "replayer"), *args], capture_output=True, text=True, timeout=timeout)
+
+
+def test_plays_bytes_in_order_with_remap(tmp_path: Path, prefix: str, collector: RawCollector) -> None:
+    bag, want_a, want_f = _bag(tmp_path, prefix)
+    got_a = collector.subscribe(f"{prefix}/remapped", String)
+    got_f = collector.subscribe(f"{prefix}/f", Float64MultiArray)
+    r = _replay(
+        str(bag),
+        "--rate",
+        "4",
+        "--remap",
+        f"{prefix}/a:={prefix}/remapped",
+        "--wait-for-subscribers",
+        "20",
+        "--delay",
+        "0.3",
+    )
+    assert r.returncode == 0, r.stderr
+    wait_until(lambda: len(got_a) == 40 and len(got_f) == 40, 10, lambda: f"{len(got_a)}, {len(got_f)} msgs")
+    assert _decoded(got_a, String) == _decoded(want_a, String)  # every message, in order
+    assert _decoded(got_f, Float64MultiArray) == _decoded(want_f, Float64MultiArray)
+    assert all(g[: len(w)] == w for g, w in zip(got_a + got_f, want_a + want_f, strict=True))  # same CDR
+    assert f"{prefix}/a -> {prefix}/remapped: 40" in r.stderr
+
+
+def test_topic_filter_rate_zero_start_offset_and_clock(
+    tmp_path: Path, prefix: str, collector: RawCollector
+) -> None:
+    bag, _, want_f = _bag(tmp_path, prefix)
+    got_a = collector.subscribe(f"{prefix}/a", String)
+    got_f = collector.subscribe(f"{prefix}/f", Float64MultiArray)
+    clock = collector.subscribe("/clock", Clock)
+    r = _replay(
+        str(bag),
+        "--rate",
+        "0",
+        "--topics",
+        f"{prefix}/f",
+        "--start-offset",
+        "0.2",
+        "--clock",
+        "--clock-step",
+        "0.005",
+        "--wait-for-subscribers",
+        "20",
+        "--delay",
+        "0.3",
+    )
+    assert r.returncode == 0, r.stderr
+    # offset 0.2 s: f messages at 7 ms + 20 ms * i >= 200 ms -> i >= 10
+    wait_until(lambda: len(got_f) == 30, 10, lambda: f"{len(got_f)} f msgs")
+    assert _decoded(got_f, Float64MultiArray) == _decoded(want_f[10:], Float64MultiArray) and got_a == []
+    from rclpy.serialization import deserialize_message
+
+    wait_until(lambda: clock and deserialize_message(clock[-1], Clock).clock.sec > 0, 10, "clock")
+    ticks = [(c.clock.sec * NS + c.clock.nanosec) for c in (deserialize_message(b, Clock) for b in clock)]
+    assert ticks[0] == T0 + 207_000_000  # first played message's time
+    assert all(b - a == 5_000_000 for a, b in itertools.pairwise(ticks))
+    assert ticks[-1] == T0 + 39 * 20_000_000 + 7_000_000
+
+
+def test_loop_until_sigint(tmp_path: Path, prefix: str, collector: RawCollector) -> None:
+    bag, want_a, _ = _bag(tmp_path, prefix)
+    got = collector.subscribe(f"{prefix}/a", String)
+    with NodeProcess(
+        "replayer",
+        str(bag),
+        "--loop",
+        "--rate",
+        "10",
+        "--topics",
+        f"{prefix}/a",
+        "--wait-for-subscribers",
+        "20",
+    ) as rp:
+        wait_until(lambda: len(got) > 90, 30, lambda: f"loop ({len(got)} msgs)")
+        assert rp.stop(signal.SIGINT) == 0, rp.output
+    assert _decoded(got[:80], String) == _decoded(want_a + want_a, String)
+    assert "pass(es) (stopped)" in rp.output
+
+
+def test_plays_a_killed_bag_with_a_warning(tmp_path: Path, prefix: str, collector: RawCollector) -> None:
+    writer = BagWriter(tmp_path / "killed")
+    from hri_physio_bridge.bag.msgdefs import installed_type_hash, message_definition
+
+    tn = "std_msgs/msg/String"
+    writer.add_topic(
+        f"{prefix}/a", tn, message_definition(tn), installed_type_hash(tn) or "", [default_qos()]
+    )
+    data = [serialize(String(data=f"k{i}")) for i in range(10)]
+    for i, d in enumerate(data):
+        writer.write(f"{prefix}/a", T0 + i * 1000, d)
+    writer.flush()
+    writer.write(f"{prefix}/a", T0 + 99_000, serialize(String(data="lost")))
+    writer.abort()
+    got = collector.subscribe(f"{prefix}/a", String)
+    r = _replay(str(tmp_path / "killed"), "--rate", "0", "--wait-for-subscribers", "20", "--delay", "0.3")
+    assert r.returncode == 0 and "did not finish" in r.stderr, r.stderr
+    wait_until(lambda: len(got) == 10, 10, lambda: f"{len(got)} msgs")
+    assert _decoded(got, String) == _decoded(data, String)
+
+
+def test_clear_errors(tmp_path: Path) -> None:
+    def one_line_error(r: subprocess.CompletedProcess, text: str) -> None:
+        assert r.returncode == 2, r
+        assert "Traceback" not in r.stderr and text in r.stderr, r.stderr
+        assert len([x for x in r.stderr.splitlines() if "error" in x]) == 1, r.stderr
+
+    one_line_error(_replay(str(tmp_path / "missing")), "does not exist")
+    (tmp_path / "corrupt.mcap").write_bytes(b"\x89MCAP0\r\n" + b"\x06" + b"\xff" * 40)
+    r = _replay(str(tmp_path / "corrupt.mcap"))
+    one_line_error(r, "empty bag")
+    (tmp_path / "junk.mcap").write_bytes(b"PK\x03\x04 a zip, not a bag" * 20)
+    one_line_error(_replay(str(tmp_path / "junk.mcap")), "not an MCAP file")
+    empty = BagWriter(tmp_path / "empty")
+    empty.add_topic("/a", "std_msgs/msg/String", "string data\n", "", [])
+    empty.close()
+    one_line_error(_replay(str(tmp_path / "empty")), "empty bag")
+    unknown = BagWriter(tmp_path / "unknown")
+    unknown.add_topic("/x", "nonexistent_msgs/msg/Thing", "int32 a\n", "RIHS01_" + "0" * 64, [])
+    unknown.write("/x", T0, b"\x00\x01\x00\x00\x05\x00\x00\x00")
+    unknown.close()
+    one_line_error(_replay(str(tmp_path / "unknown")), "not installed for /x [nonexistent_msgs/msg/Thing]")
+    one_line_error(_replay(str(tmp_path / "unknown"), "--rate", "-1"), "must be >= 0")
+    one_line_error(_replay(str(tmp_path / "unknown"), "--remap", "/x=/y"), "/from:=/to")
+    one_line_error(_replay(str(tmp_path / "unknown"), "--topics", "/nope"), "not in the bag")
+    r = _replay(str(tmp_path / "unknown"), "--info")
+    assert r.returncode == 0 and "/x [nonexistent_msgs/msg/Thing] 1 msgs" in r.stdout
+    r = _replay("--help")
+    assert r.returncode == 0 and "--clock-step" in r.stdout
