@@ -1,0 +1,255 @@
+"""Features of one window of ECG, PPG or EDA, computed with NeuroKit2, with validity rules.
+
+Every feature is either a number NeuroKit2 computed on exactly this window's samples, or NaN
+with a reason (``WindowResult.nan_reasons``), never a silent 0. Window-level problems
+(``WindowResult.flags``) make every feature NaN:
+
+* before NeuroKit2 runs: NaN/inf samples, flat line, saturation, wrong sampling rate
+  (:mod:`signal_checks`);
+* after it ran: mean rate outside [min_hr, max_hr] or signal quality below ``min_quality``
+  (noise that is not ECG/PPG still yields "peaks"; these two catch it).
+
+Window-length rules for frequency-domain HRV follow NeuroKit2's guidance: HF needs at
+least 1 min, LF 2 min and LF/HF 5 min of signal; shorter windows give NaN with the reason.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hri_physio_processing.signal_checks import Flag, check_rate, check_values
+
+MODES = ("ecg", "ppg", "eda")
+
+HEART_SCALARS = ("hr", "sdnn", "rmssd", "pnn50", "lf", "hf", "lfhf", "quality")
+EDA_SCALARS = ("tonic", "scr_count", "scr_amplitude")
+SCALARS: dict[str, tuple[str, ...]] = {"ecg": HEART_SCALARS, "ppg": HEART_SCALARS, "eda": EDA_SCALARS}
+#: Name of the peak-mask output per mode.
+PEAKS_FEATURE = {"ecg": "rpeaks", "ppg": "peaks", "eda": "scr_peaks"}
+#: Sample-rate outputs per mode (frames of the window's samples).
+SIGNAL_FEATURES: dict[str, tuple[str, ...]] = {
+    "ecg": ("clean", "rpeaks", "beat_hr"),
+    "ppg": ("clean", "peaks", "beat_hr"),
+    "eda": ("clean", "scr_peaks"),
+}
+
+#: Minimum window length (s) for each frequency-domain HRV feature (NeuroKit2's guidance).
+MIN_SECONDS = {"hf": 60.0, "lf": 120.0, "lfhf": 300.0}
+
+QUALITY_METHODS = ("templatematch", "averageQRS", "zhao2018", "none")
+#: zhao2018 answers with a category; published as a number.
+ZHAO_SCORES = {"Excellent": 1.0, "Barely acceptable": 0.5, "Unacceptable": 0.0}
+
+
+@dataclass(frozen=True)
+class FeatureSettings:
+    """What :func:`extract` needs to know (a subset of the processor configuration)."""
+
+    mode: str = "ecg"
+    sampling_rate: float = 130.0
+    quality_method: str = "templatematch"
+    min_quality: float = 0.5
+    min_beats: int = 5
+    min_hr: float = 30.0
+    max_hr: float = 220.0
+    flatline_seconds: float = 2.0
+    saturation_fraction: float = 0.01
+    rate_tolerance: float = 0.05
+    correct_artifacts: bool = False
+
+    @property
+    def nk_rate(self) -> int | float:
+        """Sampling rate as handed to NeuroKit2 (an int when whole, as the seed did)."""
+        fs = float(self.sampling_rate)
+        return int(fs) if fs.is_integer() else fs
+
+
+@dataclass
+class WindowResult:
+    """Outputs of one window. ``peaks`` are sample offsets into the window."""
+
+    mode: str
+    num_samples: int
+    clean: np.ndarray
+    peaks: np.ndarray
+    scalars: dict[str, float]
+    nan_reasons: dict[str, str] = field(default_factory=dict)
+    flags: list[Flag] = field(default_factory=list)
+    processed: bool = False  # NeuroKit2 ran on this window
+
+    @property
+    def ok(self) -> bool:
+        return not self.flags
+
+
+def _empty(mode: str, n: int, flags: list[Flag]) -> WindowResult:
+    """A window NeuroKit2 did not (successfully) process: every feature NaN, with the reasons."""
+    reason = "; ".join(f.reason for f in flags)
+    return WindowResult(
+        mode=mode, num_samples=n, clean=np.full(n, np.nan), peaks=np.empty(0, dtype=np.int64),
+        scalars=dict.fromkeys(SCALARS[mode], math.nan), nan_reasons=dict.fromkeys(SCALARS[mode], reason),
+        flags=flags,
+    )
+
+
+def _nan_all(result: WindowResult, flag: Flag, keep: tuple[str, ...] = ()) -> WindowResult:
+    """Flag a processed window: its features (but ``keep``) become NaN and no peak is trusted."""
+    result.flags.append(flag)
+    for key in result.scalars:
+        if key not in keep:
+            result.scalars[key] = math.nan
+            result.nan_reasons[key] = flag.reason
+    result.peaks = np.empty(0, dtype=np.int64)
+    return result
+
+
+def extract(timestamps: np.ndarray, x: np.ndarray, cfg: FeatureSettings) -> WindowResult:
+    """Features of one window of one channel."""
+    if cfg.mode not in MODES:
+        raise ValueError(f"unknown mode {cfg.mode!r}; choose one of {', '.join(MODES)}")
+    x = np.asarray(x, dtype=np.float64).reshape(-1)
+    fs = float(cfg.sampling_rate)
+    flags: list[Flag] = []
+    rate_flag = check_rate(timestamps, fs, cfg.rate_tolerance)
+    if rate_flag is not None:
+        flags.append(rate_flag)
+    flags.extend(check_values(x, fs, cfg.flatline_seconds, cfg.saturation_fraction))
+    if flags:
+        return _empty(cfg.mode, x.shape[0], flags)
+    runner: Callable[[np.ndarray, FeatureSettings], WindowResult] = {
+        "ecg": _ecg, "ppg": _ppg, "eda": _eda,
+    }[cfg.mode]
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # NeuroKit2 warns freely; our reasons say what matters
+            return runner(x, cfg)
+    except Exception as exc:  # NeuroKit2 raises many types on degenerate input
+        flag = Flag("neurokit_error", f"NeuroKit2 failed: {type(exc).__name__}: {exc}")
+        return _empty(cfg.mode, x.shape[0], [flag])
+
+
+def detect(x: np.ndarray, cfg: FeatureSettings) -> tuple[np.ndarray, np.ndarray]:
+    """Cleaned signal and peaks only (the same NeuroKit2 calls as :func:`extract`).
+
+    Used on a window plus its lead-in, to place peaks near the window's start.
+    """
+    import neurokit2 as nk
+
+    x = np.asarray(x, dtype=np.float64).reshape(-1)
+    fs = cfg.nk_rate
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        if cfg.mode == "ecg":
+            clean = np.asarray(nk.ecg_clean(x, sampling_rate=fs), dtype=np.float64)
+            _, info = nk.ecg_peaks(clean, sampling_rate=fs, correct_artifacts=cfg.correct_artifacts)
+            return clean, np.asarray(info["ECG_R_Peaks"], dtype=np.int64)
+        if cfg.mode == "ppg":
+            signals, info = nk.ppg_process(x, sampling_rate=fs)
+            peaks = np.asarray(info["PPG_Peaks"], dtype=np.int64)
+            return signals["PPG_Clean"].to_numpy(dtype=np.float64), peaks
+        signals, info = nk.eda_process(x, sampling_rate=fs)
+        peaks = np.asarray(info["SCR_Peaks"], dtype=np.float64)
+        return signals["EDA_Clean"].to_numpy(dtype=np.float64), peaks[np.isfinite(peaks)].astype(np.int64)
+
+
+# -- ECG / PPG -------------------------------------------------------------------
+def _ecg(x: np.ndarray, cfg: FeatureSettings) -> WindowResult:
+    import neurokit2 as nk
+
+    fs = cfg.nk_rate
+    clean = np.asarray(nk.ecg_clean(x, sampling_rate=fs), dtype=np.float64)
+    _, info = nk.ecg_peaks(clean, sampling_rate=fs, correct_artifacts=cfg.correct_artifacts)
+    peaks = np.asarray(info["ECG_R_Peaks"], dtype=np.int64)
+
+    def quality() -> float:
+        if cfg.quality_method == "none":
+            return math.nan
+        q = nk.ecg_quality(clean, rpeaks=peaks, sampling_rate=fs, method=cfg.quality_method,
+                           **({"approach": "fuzzy"} if cfg.quality_method == "zhao2018" else {}))
+        return ZHAO_SCORES[q] if isinstance(q, str) else float(np.mean(q))
+
+    return _heart(clean, peaks, quality, cfg)
+
+
+def _ppg(x: np.ndarray, cfg: FeatureSettings) -> WindowResult:
+    import neurokit2 as nk
+
+    signals, info = nk.ppg_process(x, sampling_rate=cfg.nk_rate)
+    clean = signals["PPG_Clean"].to_numpy(dtype=np.float64)
+    peaks = np.asarray(info["PPG_Peaks"], dtype=np.int64)
+
+    def quality() -> float:
+        if cfg.quality_method == "none" or "PPG_Quality" not in signals:
+            return math.nan
+        return float(signals["PPG_Quality"].mean())
+
+    return _heart(clean, peaks, quality, cfg)
+
+
+def _heart(clean: np.ndarray, peaks: np.ndarray, quality: Callable[[], float],
+           cfg: FeatureSettings) -> WindowResult:
+    """Rate, quality and HRV from beat positions (ECG R-peaks or PPG systolic peaks)."""
+    import neurokit2 as nk
+
+    n = clean.shape[0]
+    fs = cfg.nk_rate
+    duration = n / float(cfg.sampling_rate)
+    res = WindowResult(cfg.mode, n, clean, peaks, dict.fromkeys(HEART_SCALARS, math.nan), processed=True)
+    if peaks.shape[0] < max(cfg.min_beats, 2):
+        reason = f"only {peaks.shape[0]} beat(s) found, at least {max(cfg.min_beats, 2)} needed"
+        return _nan_all(res, Flag("too_few_beats", reason))
+    res.scalars["hr"] = float(np.mean(nk.signal_rate(peaks, sampling_rate=fs, desired_length=n)))
+    res.scalars["quality"] = quality()
+    if cfg.quality_method == "none":
+        res.nan_reasons["quality"] = "quality_method is none"
+    hr = res.scalars["hr"]
+    if not cfg.min_hr <= hr <= cfg.max_hr:
+        return _nan_all(res, Flag(
+            "implausible_rate",
+            f"mean rate {hr:.1f} bpm outside [{cfg.min_hr:g}, {cfg.max_hr:g}]: not a heart signal?",
+        ), keep=("quality",))
+    q = res.scalars["quality"]
+    if math.isfinite(q) and q < cfg.min_quality:
+        flag = Flag("low_quality", f"signal quality {q:.3f} below min_quality {cfg.min_quality:g}")
+        return _nan_all(res, flag, keep=("quality",))
+    hrv_time = nk.hrv_time(peaks, sampling_rate=fs)
+    for key, col in (("sdnn", "HRV_SDNN"), ("rmssd", "HRV_RMSSD"), ("pnn50", "HRV_pNN50")):
+        res.scalars[key] = float(hrv_time[col].iloc[0])
+    if duration >= min(MIN_SECONDS.values()):
+        hrv_freq = nk.hrv_frequency(peaks, sampling_rate=fs)
+        for key, col in (("lf", "HRV_LF"), ("hf", "HRV_HF"), ("lfhf", "HRV_LFHF")):
+            res.scalars[key] = float(hrv_freq[col].iloc[0])
+    for key, need in MIN_SECONDS.items():
+        if duration < need:
+            res.scalars[key] = math.nan
+            res.nan_reasons[key] = f"window {duration:g} s shorter than the {need:g} s {key.upper()} needs"
+    for key, value in res.scalars.items():
+        if not math.isfinite(value) and key not in res.nan_reasons:
+            res.nan_reasons[key] = "NeuroKit2 returned NaN (too few or too irregular beats)"
+    return res
+
+
+# -- EDA -----------------------------------------------------------------------------
+def _eda(x: np.ndarray, cfg: FeatureSettings) -> WindowResult:
+    import neurokit2 as nk
+
+    signals, info = nk.eda_process(x, sampling_rate=cfg.nk_rate)
+    clean = signals["EDA_Clean"].to_numpy(dtype=np.float64)
+    raw_peaks = np.asarray(info["SCR_Peaks"], dtype=np.float64)
+    keep = np.isfinite(raw_peaks)
+    peaks = raw_peaks[keep].astype(np.int64)
+    amplitudes = np.asarray(info["SCR_Amplitude"], dtype=np.float64)[keep]
+    res = WindowResult("eda", clean.shape[0], clean, peaks, dict.fromkeys(EDA_SCALARS, math.nan),
+                       processed=True)
+    res.scalars["tonic"] = float(signals["EDA_Tonic"].mean())
+    res.scalars["scr_count"] = float(peaks.shape[0])
+    if np.isfinite(amplitudes).any():
+        res.scalars["scr_amplitude"] = float(np.nanmean(amplitudes))
+    if not math.isfinite(res.scalars["scr_amplitude"]):
+        res.nan_reasons["scr_amplitude"] = "no skin conductance response in this window"
+    return res

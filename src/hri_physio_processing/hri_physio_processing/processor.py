@@ -1,0 +1,348 @@
+"""The NeuroKit2 processor's logic: frames in, feature frames and status out (no rclpy, no clock).
+
+Per window (see :mod:`windowing`) it publishes
+
+* one-sample frames ``[t_end, value]`` for every scalar feature, stamped with the window's
+  last sample time, NaN when invalid;
+* the cleaned signal and the peak mask for the window's *new part* only, so that the frames
+  of successive windows join into one continuous stream with every beat exactly once;
+* per-beat rate (ECG/PPG) at each newly published beat;
+* a status dict (``t`` = window end) with the window's extent, flags and NaN reasons.
+
+The part a window publishes ends ``edge_guard_seconds`` before its end (filters and peak
+detection are least reliable at the edges; the next window sees that stretch in its
+interior), moved to the middle of the RR interval it falls in, so that a peak found one
+sample earlier or later by the next window cannot cross the boundary. Peaks within
+``dedup_seconds`` of the last published one are dropped as duplicates. When windows overlap
+by less than two guards (down to windows that just meet, hop = window), the cleaned signal
+and peaks are taken from a second NeuroKit2 pass over the window plus a lead-in of two guards
+of preceding samples, so the held-back stretch is in the interior of the next window's pass;
+the scalar features are always computed on the window alone.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from hri_physio_bridge.frames import Frame
+from hri_physio_processing.config import ProcessorConfig
+from hri_physio_processing.features import (
+    PEAKS_FEATURE,
+    SCALARS,
+    SIGNAL_FEATURES,
+    WindowResult,
+    detect,
+    extract,
+)
+from hri_physio_processing.windowing import Discarded, Gap, Window, WindowAccumulator
+
+
+@dataclass(frozen=True)
+class FrameOutput:
+    """A frame for ``<output_prefix>/<feature>``."""
+
+    feature: str
+    frame: Frame
+
+
+@dataclass(frozen=True)
+class StatusOutput:
+    """A JSON-able status object for ``<output_prefix>/status`` (always has ``t``)."""
+
+    payload: dict[str, Any]
+
+
+Output = FrameOutput | StatusOutput
+
+
+@dataclass(frozen=True)
+class _View:
+    """What a window publishes from: timestamps, cleaned signal and peaks; ``offset`` samples of
+    lead-in (before the window proper) come first."""
+
+    t: np.ndarray
+    clean: np.ndarray
+    peaks: np.ndarray
+    offset: int
+
+
+@dataclass
+class ProcessorStats:
+    windows: int = 0
+    flagged_windows: int = 0
+    published_peaks: int = 0
+    duplicate_peaks: int = 0
+    gaps: int = 0
+    discarded_samples: int = 0
+    samples_in: int = 0
+
+    def as_dict(self) -> dict[str, int]:
+        return dict(self.__dict__)
+
+
+@dataclass
+class _Pending:
+    """Gaps and discarded samples not yet reported (reported at most once per hop)."""
+
+    gaps: int = 0
+    missing_samples: int = 0
+    backward_steps: int = 0
+    discarded: int = 0
+    t_first: float = math.nan
+    t_last: float = math.nan
+    examples: list[str] = field(default_factory=list)
+
+    def empty(self) -> bool:
+        return self.gaps == 0 and self.discarded == 0
+
+
+class NeurokitProcessor:
+    """Windows a stream and turns each window into feature outputs."""
+
+    def __init__(self, cfg: ProcessorConfig) -> None:
+        self.cfg = cfg
+        self.fs = float(cfg.sampling_rate)
+        self.settings = cfg.features
+        overlap = cfg.window_samples - cfg.hop_samples
+        guard = round(cfg.edge_guard_seconds * self.fs)
+        # Windows that overlap by less than two guards get a lead-in of two guards for peak
+        # detection, so the stretch each window holds back is inside the next one's view.
+        self.context = 2 * guard if overlap < 2 * guard else 0
+        self.guard = min(guard, (overlap + self.context) // 2)
+        self.acc = WindowAccumulator(
+            cfg.window_samples, cfg.hop_samples, self.fs, cfg.gap_factor,
+            min_samples=max(2, round(cfg.min_window_seconds * self.fs)), context=self.context,
+        )
+        self.dedup = cfg.mode_default("dedup_seconds")
+        self.peaks_feature = PEAKS_FEATURE[cfg.mode]
+        self.stats = ProcessorStats()
+        self._boundary: float | None = None  # last published sample time (this segment)
+        self._last_peak: float | None = None  # last published peak time (this segment)
+        self._pending = _Pending()
+        self._last_event_t: float | None = None
+        # The last window of the segment if it kept an unpublished tail (it was not final).
+        self._open: _View | None = None
+
+    # -- public API ------------------------------------------------------------
+    def push(self, frame: Frame) -> list[Output]:
+        """Take the next chunk of the input stream."""
+        if frame.num_samples == 0:
+            return []
+        if frame.num_channels <= self.cfg.channel:
+            raise ValueError(
+                f"input frame has {frame.num_channels} channel(s); channel {self.cfg.channel} was asked for"
+            )
+        self.stats.samples_in += frame.num_samples
+        values = np.asarray(frame.values[:, self.cfg.channel], dtype=np.float64)
+        return self._handle(self.acc.push(frame.timestamps, values))
+
+    def finish(self) -> list[Output]:
+        """The input ended: process what is left and report anything pending."""
+        out = self._handle(self.acc.flush())
+        out.extend(self._close_segment())
+        out.extend(self._report_pending())
+        return out
+
+    # -- events ----------------------------------------------------------------
+    def _handle(self, events: list) -> list[Output]:
+        out: list[Output] = []
+        for ev in events:
+            if isinstance(ev, Window):
+                out.extend(self._report_pending())
+                out.extend(self._window(ev))
+            elif isinstance(ev, Gap):
+                out.extend(self._close_segment())
+                self.stats.gaps += 1
+                p = self._pending
+                p.gaps += 1
+                p.missing_samples += ev.missing_samples
+                p.backward_steps += ev.kind == "backward"
+                step = ev.t_after - ev.t_before
+                self._note(p, ev.t_before, ev.t_after,
+                           f"{ev.kind} {ev.t_before:.6f} -> {ev.t_after:.6f} ({step:+.4g} s)")
+                self._boundary = self._last_peak = None  # a new segment starts
+                out.extend(self._maybe_report(ev.t_after))
+            elif isinstance(ev, Discarded):
+                self.stats.discarded_samples += ev.samples
+                self._pending.discarded += ev.samples
+                self._note(self._pending, ev.t_start, ev.t_end,
+                           f"{ev.samples} sample(s) {ev.t_start:.6f}..{ev.t_end:.6f}")
+                out.extend(self._maybe_report(ev.t_end))
+        return out
+
+    @staticmethod
+    def _note(p: _Pending, t0: float, t1: float, example: str) -> None:
+        if math.isnan(p.t_first):
+            p.t_first = t0
+        p.t_last = t1
+        if len(p.examples) < 3:
+            p.examples.append(example)
+
+    def _maybe_report(self, t: float) -> list[Output]:
+        """Report gaps/discards now unless one was reported less than a hop ago (source time)."""
+        if self._last_event_t is not None and t - self._last_event_t < self.cfg.hop_seconds:
+            return []
+        return self._report_pending()
+
+    def _report_pending(self) -> list[Output]:
+        p = self._pending
+        if p.empty():
+            return []
+        self._last_event_t = p.t_last
+        reasons = []
+        if p.gaps:
+            reasons.append(
+                f"{p.gaps} timestamp discontinuit{'y' if p.gaps == 1 else 'ies'} "
+                f"(about {p.missing_samples} missing sample(s), {p.backward_steps} backward step(s)); "
+                "windows restart after each"
+            )
+        if p.discarded:
+            reasons.append(
+                f"{p.discarded} sample(s) not processed: their stretch between discontinuities is shorter "
+                f"than min_window_seconds ({self.cfg.min_window_seconds:g} s)"
+            )
+        if p.gaps >= 10 and p.discarded:
+            reasons.append("timestamps keep jumping: is sampling_rate "
+                           f"({self.fs:g} Hz) right for this stream?")
+        payload = {
+            "t": p.t_last, "event": "discontinuity", "mode": self.cfg.mode, "ok": False,
+            "gaps": p.gaps, "missing_samples": p.missing_samples, "backward_steps": p.backward_steps,
+            "discarded_samples": p.discarded, "t_first": p.t_first, "t_last": p.t_last,
+            "examples": p.examples, "reason": "; ".join(reasons),
+        }
+        self._pending = _Pending()
+        return [StatusOutput(payload)]
+
+    # -- one window ------------------------------------------------------------
+    def _window(self, w: Window) -> list[Output]:
+        res = extract(w.timestamps, w.values[:, 0], self.settings)
+        self.stats.windows += 1
+        self.stats.flagged_windows += not res.ok
+        view = self._view(w, res)
+        start = self._region_start(view)
+        end = self._region_end(w, view, start)
+        out, peaks, dups = self._publish_region(view, start, end)
+        self._open = None if w.final or end == view.t.shape[0] else view
+        t_end = w.t_end
+        for name in SCALARS[self.cfg.mode]:
+            value = res.scalars[name]
+            out.append(FrameOutput(name, Frame(np.array([t_end]), np.array([[value]]), (name,))))
+        out.append(StatusOutput(self._status(w, res, view, start, end, peaks, dups)))
+        return out
+
+    def _view(self, w: Window, res: WindowResult) -> _View:
+        """Signal and peaks to publish from: the window itself, or the window plus its lead-in."""
+        lead = w.pre_timestamps.shape[0]
+        if not (self.context and lead and res.ok):
+            return _View(w.timestamps, res.clean, res.peaks, 0)
+        x = np.concatenate([w.pre_values[:, 0], w.values[:, 0]])
+        try:
+            clean, peaks = detect(x, self.settings)
+        except Exception:  # the window itself was fine; keep its own result
+            return _View(w.timestamps, res.clean, res.peaks, 0)
+        return _View(np.concatenate([w.pre_timestamps, w.timestamps]), clean, peaks, lead)
+
+    def _close_segment(self) -> list[Output]:
+        """The segment ended after a non-final window: publish that window's held-back tail."""
+        if self._open is None:
+            return []
+        view = self._open
+        self._open = None
+        out, _, _ = self._publish_region(view, self._region_start(view), view.t.shape[0])
+        return out
+
+    def _region_start(self, view: _View) -> int:
+        if self._boundary is None:
+            return view.offset
+        return int(np.searchsorted(view.t, self._boundary, side="right"))
+
+    def _publish_region(self, view: _View, start: int, end: int) -> tuple[list[Output], np.ndarray, int]:
+        """Signal, peak mask and per-beat rate for samples [start, end) of the view."""
+        t = view.t
+        peaks, dups = self._new_peaks(t, view.peaks, start, end)
+        out: list[Output] = []
+        if end > start:
+            ts = t[start:end]
+            out.append(FrameOutput("clean", Frame(ts, view.clean[start:end].reshape(-1, 1), ("clean",))))
+            mask = np.zeros(end - start)
+            mask[peaks - start] = 1.0
+            out.append(FrameOutput(self.peaks_feature, Frame(ts, mask.reshape(-1, 1), (self.peaks_feature,))))
+            self._boundary = float(t[end - 1])
+        if "beat_hr" in SIGNAL_FEATURES[self.cfg.mode] and peaks.shape[0]:
+            beat_t, beat_hr = self._beat_rates(t, view.peaks, peaks)
+            if beat_t.shape[0]:
+                out.append(FrameOutput("beat_hr", Frame(beat_t, beat_hr.reshape(-1, 1), ("beat_hr",))))
+        if peaks.shape[0]:
+            self._last_peak = float(t[peaks[-1]])
+        self.stats.published_peaks += int(peaks.shape[0])
+        self.stats.duplicate_peaks += dups
+        return out, peaks, dups
+
+    def _region_end(self, w: Window, view: _View, start: int) -> int:
+        """Exclusive end (view index) of the part to publish now (see the module docstring)."""
+        n = view.t.shape[0]
+        if w.final:
+            return n
+        # The next window (with its lead-in) starts here: the boundary must not fall before it.
+        first_next = view.offset + w.next_start - self.context
+        nominal = n - self.guard
+        end = nominal
+        peaks = view.peaks
+        i = int(np.searchsorted(peaks, nominal))
+        if 0 < i < peaks.shape[0]:
+            mid = int((peaks[i - 1] + peaks[i]) // 2) + 1
+            if first_next <= mid <= n:
+                end = mid
+        return max(end, start, min(first_next, n))
+
+    def _new_peaks(self, t: np.ndarray, peaks: np.ndarray, start: int, end: int) -> tuple[np.ndarray, int]:
+        p = peaks[(peaks >= start) & (peaks < end)]
+        if not p.shape[0]:
+            return p, 0
+        keep = np.ones(p.shape[0], dtype=bool)
+        last = self._last_peak
+        for k, idx in enumerate(p):
+            if last is not None and t[idx] - last < self.dedup:
+                keep[k] = False
+            else:
+                last = float(t[idx])
+        return p[keep], int((~keep).sum())
+
+    def _beat_rates(
+        self, t: np.ndarray, all_peaks: np.ndarray, new: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Rate at each new beat from the interval to the previous beat found in this window."""
+        pos = np.searchsorted(all_peaks, new)
+        has_prev = pos > 0
+        cur = new[has_prev]
+        prev = all_peaks[pos[has_prev] - 1]
+        return t[cur], 60.0 * self.fs / (cur - prev).astype(np.float64)
+
+    def _status(self, w: Window, res: WindowResult, view: _View, start: int, end: int, peaks: np.ndarray,
+                dups: int) -> dict[str, Any]:
+        t = view.t
+        status: dict[str, Any] = {
+            "t": w.t_end,
+            "event": "window",
+            "mode": self.cfg.mode,
+            "ok": res.ok,
+            "window": {
+                "index": w.index, "segment": w.segment, "t_start": w.t_start, "t_end": w.t_end,
+                "samples": w.num_samples, "seconds": w.num_samples / self.fs, "final": w.final,
+            },
+            "flags": [{"code": f.code, "reason": f.reason} for f in res.flags],
+            "nan": dict(res.nan_reasons),
+            "features": {k: (v if math.isfinite(v) else None) for k, v in res.scalars.items()},
+            "peaks_in_window": int(res.peaks.shape[0]),
+            "peaks_published": int(peaks.shape[0]),
+            "duplicates_dropped": dups,
+            "lead_in_samples": view.offset,
+        }
+        if end > start:
+            status["published"] = {"t_start": float(t[start]), "t_end": float(t[end - 1]),
+                                   "samples": end - start}
+        return status
