@@ -1,0 +1,1 @@
+"""HRI Physio scenario and adaptation: scenario engine, exercise coach, simulated participant."""

@@ -1,0 +1,417 @@
+"""The QT cardio-aware exercise coach on top of the scenario engine (no rclpy).
+
+The routine file says what happens when (phases, activities, media, speech); this module
+gives the scenario its exercise-specific parts: the calibration of HR_rest and the zone,
+the HR buffer, the rule update (an :class:`~hri_physio_coach.policies.Adapter` on the speed
+ladder, gated on signal quality), the random behaviours, the calibration reminders, and
+the robot commands of the text protocol. Every decision becomes a JSON-able event with
+its inputs and outputs and the participant id (never the name).
+"""
+
+from __future__ import annotations
+
+import math
+import random
+import string
+from collections.abc import Callable, Mapping
+from decimal import ROUND_HALF_UP, Decimal
+from pathlib import Path
+from typing import Any
+
+from hri_physio_coach.config import CoachConfig
+from hri_physio_coach.engine import FINISHED, STOPPED, ActionContext, Event, Hook, Listener, ScenarioEngine
+from hri_physio_coach.hr_input import HeartRateMonitor
+from hri_physio_coach.ladder import SpeedLadder
+from hri_physio_coach.paths import default_routine_file
+from hri_physio_coach.policies import (
+    AT_LIMIT,
+    ENCOURAGE,
+    GATED,
+    HOLD,
+    SCHEDULED_SLOW_DOWN,
+    SLOW_DOWN,
+    SPEED_UP,
+    Adapter,
+    Decision,
+    RuleInput,
+    make_policy,
+)
+from hri_physio_coach.routine import Action, Activity, Phase, Routine, load_routine
+from hri_physio_coach.zones import HeartRateZone, tanaka_hr_max
+
+CALIBRATION = "calibration"
+RULE_UPDATE, BEHAVIOUR, REMINDER = "rule_update", "behaviour", "reminder"
+BEHAVIOURS = ("motivation", "emotion", "hr_report")
+
+_STRING_VARS = ("name", "video", "gesture", "label", "activity", "phase", "splash", "music",
+                "relaxing_audio", "relaxing_video", "relaxing_gesture", "minutes_word")
+_NUMBER_VARS = ("speed", "tempo", "relaxing_speed", "calib_minutes", "minutes_left", "hr_rest", "hr_max",
+                "zone_low", "zone_high", "zone_target", "hr")
+
+
+class CoachError(ValueError):
+    """The routine and the coach do not fit together (unknown placeholder, hook or call)."""
+
+
+def _spoken(bpm: float) -> float:
+    """A heart rate as people round it, half up to 0.1 bpm (155.05 -> 155.1, as in the thesis).
+
+    ``format(155.05, ".1f")`` gives 155.0 because the binary value is a hair below; speech
+    templates get the half-up value so the announcement matches a hand calculation.
+    """
+    return float(Decimal(repr(round(bpm, 6))).quantize(Decimal("0.1"), rounding=ROUND_HALF_UP))
+
+
+def routine_variables(config: CoachConfig) -> dict[str, float]:
+    """Names a routine file may use for durations and delays."""
+    return {"calib_time": config.calib_time, "video_time": config.video_time,
+            "rule_period": config.rule_period, "behaviour_period": config.behaviour_period}
+
+
+def load_coach_routine(config: CoachConfig) -> Routine:
+    path = Path(config.routine_file) if config.routine_file else default_routine_file()
+    return load_routine(path, routine_variables(config))
+
+
+class ExerciseCoach(Listener):
+    """Runs the exercise session: feed it HR samples and command replies, tick it with time."""
+
+    def __init__(self, config: CoachConfig, clock: Callable[[], float], send: Callable[[str], None],
+                 sink: Callable[[Event], None], routine: Routine | None = None) -> None:
+        self.cfg = config
+        self.clock = clock
+        self._send = send
+        self._sink = sink
+        self.participant = config.participant
+        routine = routine if routine is not None else load_coach_routine(config)
+        if config.calib_skip:
+            routine = routine.without([CALIBRATION])
+        self.hr_max = tanaka_hr_max(config.part_age)
+        self.ladder = SpeedLadder(config.speed_modifier, config.audio_suffix, config.speed_idx)
+        self.adapter = Adapter(make_policy(config.policy, config.seed), self.ladder, config.adapter_options)
+        self.rng = random.Random(f"behaviour:{config.seed}")
+        self.monitor = HeartRateMonitor(
+            config.hr_valid_min, config.hr_valid_max, config.hr_timeout, config.min_valid_samples,
+            config.max_invalid_fraction, config.buffer, config.hr_report_window,
+        )
+        self.zone: HeartRateZone | None = None
+        self.hr_rest_source: str | None = None
+        self._calibrated_in_phase = False
+        self._gesture: tuple[str, bool] | None = None  # (name, follows the ladder)
+        self._audio_follows_ladder = False
+        self._calls: dict[str, Callable[[ActionContext], None]] = {"calibrate": self._call_calibrate}
+        hooks = {
+            RULE_UPDATE: Hook(RULE_UPDATE, config.rule_period, self._rule_update, priority=10),
+            BEHAVIOUR: Hook(BEHAVIOUR, config.behaviour_period, self._behaviour, priority=0),
+            REMINDER: Hook(REMINDER, config.calib_reminder_period, self._reminder, priority=5),
+        }
+        self._check_routine(routine)
+        try:
+            self.engine = ScenarioEngine(routine, clock, self._emit, self._on_action, hooks, listener=self)
+        except ValueError as exc:
+            raise CoachError(str(exc)) from None
+        self.decisions: list[Decision] = []
+
+    # --- public API --------------------------------------------------------------------------
+    @property
+    def routine(self) -> Routine:
+        return self.engine.routine
+
+    @property
+    def started(self) -> bool:
+        return self.engine.state != "idle"
+
+    @property
+    def finished(self) -> bool:
+        return self.engine.state in (FINISHED, STOPPED)
+
+    def start(self, now: float | None = None) -> None:
+        self.engine.start(now)
+
+    def tick(self, now: float | None = None) -> None:
+        now = self.clock() if now is None else float(now)
+        if self.engine.running:
+            self._check_hr_timeout(now)
+        self.engine.tick(now)
+
+    def stop(self, reason: str) -> None:
+        self.engine.stop(reason)
+
+    def on_hr(self, hr: float, now: float | None = None, flagged: bool = False,
+              source_t: float | None = None) -> None:
+        """One HR sample (bpm) received at ``now`` on the coach's clock; ``source_t`` is its own stamp."""
+        now = self.clock() if now is None else float(now)
+        self.monitor.add(now, float(hr), flagged)
+        if self.engine.running:
+            self._check_hr_timeout(now)
+
+    def on_reply(self, reply: Mapping[str, Any]) -> None:
+        """A reply of qt_controller; failures are logged as events and the session goes on."""
+        if not reply.get("ok", True):
+            self._emit({"t": self.engine.now, "event": "command_failed",
+                        "command": self._redact(str(reply.get("command", ""))),
+                        "message": self._redact(str(reply.get("message", ""))), "source": "robot"})
+
+    def state(self) -> Event:
+        """A snapshot for /coach/state."""
+        return {
+            "t": self.engine.now, "participant": self.participant, "policy": self.cfg.policy,
+            **self.engine.state_dict(), **{f"ladder_{k}": v for k, v in self.ladder.state().items()},
+            "zone": self.zone.as_dict() if self.zone else None,
+            "adaptation": "paused" if self.monitor.lost else "active", "last_hr": self.monitor.last_hr,
+        }
+
+    # --- events and commands -----------------------------------------------------------------
+    def _emit(self, event: Event) -> None:
+        self._sink({"t": event.get("t", self.engine.now), "participant": self.participant, **event})
+
+    def _redact(self, text: str) -> str:
+        name = self.cfg.part_name.strip()
+        return text.replace(name, "<name>") if name else text
+
+    def command(self, line: str, why: str) -> bool:
+        """Send one robot command; a failure to send is logged and does not stop the session."""
+        self._emit({"event": "command", "command": self._redact(line), "why": why})
+        try:
+            self._send(line)
+        except Exception as exc:  # any transport failure must not end the session
+            self._emit({"event": "command_failed", "command": self._redact(line),
+                        "message": f"{type(exc).__name__}: {exc}", "source": "send"})
+            return False
+        return True
+
+    def say(self, text: str, why: str) -> None:
+        self.command(f"set speech {text}", why)
+
+    # --- template variables ------------------------------------------------------------------
+    def _variables(self, ctx: ActionContext | None = None, **extra: Any) -> dict[str, Any]:
+        cfg = self.cfg
+        phase = ctx.phase if ctx else self.engine.phase
+        activity = ctx.activity if ctx else self.engine.activity
+        now = ctx.t if ctx else self.engine.now
+        minutes_left = max(0, math.ceil((self.engine.phase_end - now) / 60.0 - 1e-9)) if phase else 0
+        values: dict[str, Any] = {
+            "name": cfg.part_name if cfg.address_by_name else "friend",
+            "splash": cfg.video_default,
+            "music": cfg.audio_exercise_base.format(self.ladder.suffix),
+            "relaxing_audio": cfg.audio_relaxing, "relaxing_video": cfg.video_relaxing,
+            "relaxing_gesture": cfg.gesture_relaxing, "relaxing_speed": cfg.gesture_relaxing_speed,
+            "speed": self.ladder.speed, "tempo": self.ladder.tempo or 0.0,
+            "calib_minutes": round(cfg.calib_time / 60.0),
+            "minutes_left": minutes_left, "minutes_word": "minute" if minutes_left == 1 else "minutes",
+            "phase": phase.name if phase else "", "activity": activity.name if activity else "",
+            "label": activity.label if activity else "", "video": "", "gesture": "",
+            "hr_max": self.hr_max, "hr": self.monitor.last_hr or 0.0,
+        }
+        if self.zone is not None:
+            values.update(hr_rest=_spoken(self.zone.hr_rest), zone_low=_spoken(self.zone.low),
+                          zone_high=_spoken(self.zone.high), zone_target=_spoken(self.zone.target))
+        if activity is not None:
+            values.update({k: v for k, v in activity.attrs.items() if isinstance(v, str | int | float)})
+        values.update(extra)
+        return values
+
+    def _check_routine(self, routine: Routine) -> None:
+        """Fail at start-up, not mid-session, on placeholders, calls or hooks the coach lacks."""
+        dummy: dict[str, Any] = {k: "x" for k in _STRING_VARS} | {k: 1.0 for k in _NUMBER_VARS}
+        templates = [("speech_hr_report", self.cfg.speech_hr_report), ("speech_zone", self.cfg.speech_zone),
+                     ("speech_calib_reminder", self.cfg.speech_calib_reminder)]
+        for phase in routine.phases:
+            actions = [*phase.on_enter, *phase.on_exit, *phase.activity_actions]
+            for activity in phase.activities:
+                extra = {k: "x" for k in activity.attrs}
+                for action in (*actions, *activity.on_enter):
+                    where = f"phase {phase.name!r}, activity {activity.name!r}"
+                    self._check_action(action, dummy | extra, where)
+        for action in (*routine.on_start, *routine.on_end):
+            self._check_action(action, dummy, "routine start/end")
+        for key, text in templates:
+            self._check_template(text, dummy, f"configuration {key}")
+        names = [t for _, t, _, _ in string.Formatter().parse(self.cfg.audio_exercise_base) if t]
+        if names:
+            raise CoachError(f"audio_exercise_base must use '{{}}' for the tempo suffix, not {names}")
+
+    def _check_action(self, action: Action, dummy: Mapping[str, Any], where: str) -> None:
+        if action.kind == "call":
+            if action.value not in self._calls:
+                raise CoachError(f"{where}: unknown call {action.value!r} (known: {sorted(self._calls)})")
+            return
+        self._check_template(action.value, dummy, f"{where}, {action.kind} action")
+        speed = action.params.get("speed")
+        if speed is not None and speed != "current" and not isinstance(speed, int | float):
+            self._check_template(str(speed), dummy, f"{where}, gesture speed")
+
+    @staticmethod
+    def _check_template(text: str, dummy: Mapping[str, Any], where: str) -> None:
+        try:
+            text.format_map(dummy)
+        except KeyError as exc:
+            raise CoachError(f"{where}: unknown placeholder {{{exc.args[0]}}} in {text!r}") from None
+        except (ValueError, IndexError) as exc:
+            raise CoachError(f"{where}: bad template {text!r}: {exc}") from None
+
+    # --- routine actions ---------------------------------------------------------------------
+    def _on_action(self, action: Action, ctx: ActionContext) -> None:
+        if action.kind == "call":
+            self._calls[action.value](ctx)
+            return
+        variables = self._variables(ctx)
+        value = action.value.format_map(variables)
+        why = f"{ctx.phase.name if ctx.phase else 'routine'}/{ctx.activity.name if ctx.activity else '-'}"
+        if action.kind == "say":
+            self.say(value, why)
+        elif action.kind == "emotion":
+            self.command(f"set emotion {value}", why)
+        elif action.kind == "volume":
+            self.command(f"set volume {value}", why)
+        elif action.kind == "video":
+            self.command(f"set video {self.cfg.video_path.format(value)}", why)
+        elif action.kind == "audio":
+            self._audio_follows_ladder = "{music}" in action.value
+            self.command(f"set audio {self.cfg.audio_path.format(value)}", why)
+        elif action.kind == "gesture":
+            raw_speed = action.params.get("speed", "current")
+            follows = raw_speed == "current"
+            speed = self.ladder.speed if follows else float(str(raw_speed).format_map(variables))
+            self._gesture = (value, follows)
+            self.command(f"set gesture {value} {speed:.2f}", why)
+
+    def _resend_pace(self, why: str) -> None:
+        """After a ladder change: the gesture at the new speed, the music at the new tempo."""
+        if self._gesture is not None and self._gesture[1]:
+            self.command(f"set gesture {self._gesture[0]} {self.ladder.speed:.2f}", why)
+        if self._audio_follows_ladder:
+            music = self.cfg.audio_exercise_base.format(self.ladder.suffix)
+            self.command(f"set audio {self.cfg.audio_path.format(music)}", why)
+
+    # --- listener ----------------------------------------------------------------------------
+    def on_phase_start(self, phase: Phase, t: float) -> None:
+        if phase.kind == CALIBRATION:
+            self._calibrated_in_phase = False
+            self.monitor.start_calibration()
+        elif self.zone is None:
+            self._set_zone(self.cfg.resting_default, "default", "calibration skipped", 0, t)
+
+    def on_phase_end(self, phase: Phase, t: float) -> None:
+        if phase.kind == CALIBRATION and not self._calibrated_in_phase:
+            self._calibrate(t)
+
+    def on_activity_start(self, phase: Phase, activity: Activity, t: float) -> None:
+        self.monitor.clear()
+        if phase.kind != CALIBRATION:
+            self._gesture = None  # the activity's own actions set its gesture
+
+    def on_end(self, t: float) -> None:
+        self._emit({"event": "summary", "decisions": len(self.decisions),
+                    "adaptations": sum(1 for d in self.decisions if d.changed),
+                    "final_ladder_index": self.ladder.index})
+
+    # --- calibration -------------------------------------------------------------------------
+    def _call_calibrate(self, ctx: ActionContext) -> None:
+        self._calibrate(ctx.t)
+
+    def _calibrate(self, t: float) -> None:
+        samples = self.monitor.finish_calibration()
+        self._calibrated_in_phase = True
+        if len(samples) >= self.cfg.calib_min_samples:
+            hr_rest = sum(samples) / len(samples)
+            if hr_rest < self.hr_max:
+                self._set_zone(hr_rest, "measured", "mean HR over calibration", len(samples), t)
+                return
+            reason = f"measured HR_rest {hr_rest:.1f} is not below HR_max {self.hr_max:.1f}"
+        else:
+            reason = (f"too few valid HR samples during calibration: {len(samples)} < "
+                      f"{self.cfg.calib_min_samples}")
+        self._set_zone(self.cfg.resting_default, "default", reason, len(samples), t)
+
+    def _set_zone(self, hr_rest: float, source: str, reason: str, n: int, t: float) -> None:
+        self.zone = HeartRateZone(hr_rest, self.hr_max, self.cfg.zone_low, self.cfg.zone_high)
+        self.hr_rest_source = source
+        self._emit({"t": t, "event": "calibration", "hr_rest": hr_rest, "source": source, "reason": reason,
+                    "n_samples": n, "age": self.cfg.part_age})
+        self._emit({"t": t, "event": "zone", **self.zone.as_dict()})
+        self.say(self.cfg.speech_zone.format_map(self._variables()), "zone announcement")
+
+    # --- hooks -------------------------------------------------------------------------------
+    def _reminder(self, t: float) -> None:
+        text = self.cfg.speech_calib_reminder.format_map(self._variables())
+        self._emit({"event": "behaviour", "kind": "reminder", "text": self._redact(text)})
+        self.say(text, "calibration reminder")
+
+    def _behaviour(self, t: float) -> None:
+        kind = self.rng.choice(BEHAVIOURS)
+        fallback_from = None
+        recent = self.monitor.recent_mean(t, self.cfg.hr_report_window)
+        if kind == "hr_report" and recent is None:
+            fallback_from = kind
+            kind = self.rng.choice(BEHAVIOURS[:2])
+        event: Event = {"event": "behaviour", "kind": kind}
+        if fallback_from:
+            event["fallback_from"] = fallback_from
+            event["reason"] = f"no valid HR in the last {self.cfg.hr_report_window:g} s"
+        if kind == "motivation":
+            text = self.rng.choice(self.cfg.speech_motivation)
+            event["text"] = text
+            self._emit(event)
+            self.say(text, "behaviour: motivation")
+        elif kind == "emotion":
+            emotion = self.rng.choice(self.cfg.emotion_motivation)
+            event["emotion"] = emotion
+            self._emit(event)
+            self.command(f"set emotion {emotion}", "behaviour: emotion")
+        else:
+            text = self.cfg.speech_hr_report.format_map(self._variables(hr=recent))
+            event.update(text=text, hr=recent, window=self.cfg.hr_report_window)
+            self._emit(event)
+            self.say(text, "behaviour: heart-rate report")
+
+    def _rule_update(self, t: float) -> None:
+        stats = self.monitor.take()
+        phase = self.engine.phase
+        activity = self.engine.activity
+        inputs = {**stats.as_dict(), "phase": phase.name if phase else None,
+                  "phase_kind": phase.kind if phase else None,
+                  "activity": activity.name if activity else None,
+                  "zone": [self.zone.low, self.zone.high] if self.zone else None,
+                  "ladder_index": self.ladder.index}
+        reason = "no heart-rate zone yet" if self.zone is None else self.monitor.gate(stats, t)
+        if reason is not None or self.zone is None or stats.mean is None or phase is None:
+            decision = self.adapter.gated(t, reason or "no heart rate", stats.mean)
+        else:
+            decision = self.adapter.update(RuleInput(
+                t=t, hr=stats.mean, zone=self.zone, phase=phase.kind,
+                phase_start=self.engine.phase_start, phase_end=self.engine.phase_end,
+            ))
+        self.decisions.append(decision)
+        self._emit({"event": RULE_UPDATE, "inputs": inputs, "decision": decision.as_dict(),
+                    "ladder": self.ladder.state()})
+        self._speak_decision(decision)
+        if decision.changed:
+            self._resend_pace(f"rule update: {decision.action}")
+
+    def _speak_decision(self, decision: Decision) -> None:
+        cfg, action = self.cfg, decision.action
+        if action == GATED:
+            return  # nothing about pace without a trustworthy heart rate
+        if action == SPEED_UP:
+            lines = cfg.speech_faster
+        elif action in (SLOW_DOWN,) or (action == AT_LIMIT and decision.proposed < 0):
+            lines = cfg.speech_slower
+        elif action == SCHEDULED_SLOW_DOWN:
+            lines = cfg.speech_cooldown
+        elif action in (ENCOURAGE, HOLD, AT_LIMIT):
+            lines = cfg.speech_motivation
+        else:
+            raise AssertionError(f"unhandled decision action {action}")
+        self.say(self.rng.choice(lines), f"rule update: {action}")
+
+    def _check_hr_timeout(self, now: float) -> None:
+        start = self.engine.start_time if self.engine.start_time is not None else now
+        change = self.monitor.check_timeout(now, start)
+        if change == "lost":
+            self._emit({"t": now, "event": "hr_lost", "silent_since": self.monitor.silent_since,
+                        "timeout": self.cfg.hr_timeout,
+                        "reason": f"no HR sample for more than {self.cfg.hr_timeout:g} s: adaptation paused, "
+                                  "routine continues"})
+        elif change == "resumed":
+            self._emit({"t": now, "event": "hr_resumed", "reason": "HR samples are back: adaptation resumes"})

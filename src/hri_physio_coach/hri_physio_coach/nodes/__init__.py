@@ -1,0 +1,1 @@
+"""Node shells (rclpy) of hri_physio_coach."""

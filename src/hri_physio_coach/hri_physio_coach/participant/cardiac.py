@@ -1,0 +1,184 @@
+"""Beats and ECG from the simulated heart rate (PARTICIPANT_MODEL.md, "Beat-to-beat RR and ECG").
+
+NeuroKit2's ``ecg_simulate`` only takes a constant heart rate, so the ECG is
+synthesised from the beat series itself, ECGSYN-style: the cardiac phase
+advances by 2*pi per RR interval (R peak at phase 0) and the P, Q, R, S, T waves
+are Gaussians in phase whose widths scale with sqrt(HR/60).
+
+:class:`ParticipantSimulator` streams everything a Polar H10 would send: ECG at
+130 Hz, RR intervals (with the strap's occasional missed or extra beat) and HR
+at 1 Hz. Time is advanced explicitly by the caller.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hri_physio_coach.participant.physiology import (
+    Activity,
+    HeartRateKinetics,
+    ParticipantParams,
+    breathing_rate,
+    rr_sd,
+)
+
+TWO_PI = 2.0 * math.pi
+# (phase of the wave centre in rad, width in rad at 60 bpm, amplitude in mV) for P, Q, R, S, T.
+WAVES = np.array([
+    (-math.pi / 3.0, 0.25, 0.15),
+    (-math.pi / 12.0, 0.10, -0.15),
+    (0.0, 0.10, 1.20),
+    (math.pi / 12.0, 0.10, -0.25),
+    (math.pi / 2.0, 0.40, 0.30),
+])
+
+
+def ecg_waveform(t: np.ndarray, beat_start: float, rr: float) -> np.ndarray:
+    """ECG (mV) at times ``t`` inside the interval [beat_start, beat_start + rr).
+
+    The second half of the interval shows the P and Q waves of the next beat
+    (phase wrapped to (-pi, pi]), so consecutive intervals join smoothly.
+    """
+    theta = TWO_PI * (t - beat_start) / rr
+    theta = np.where(theta > math.pi, theta - TWO_PI, theta)
+    scale = math.sqrt((60.0 / rr) / 60.0)
+    d = theta[:, None] - WAVES[None, :, 0]
+    d = (d + math.pi) % TWO_PI - math.pi
+    widths = WAVES[:, 1] * scale
+    return (WAVES[:, 2] * np.exp(-0.5 * (d / widths) ** 2)).sum(axis=1)
+
+
+@dataclass
+class SimulatorOutput:
+    """Samples produced by one :meth:`ParticipantSimulator.advance` call (times in seconds)."""
+
+    ecg_t: np.ndarray
+    ecg_mv: np.ndarray
+    beat_t: np.ndarray  # true R-peak times (what the ECG shows)
+    rr_t: np.ndarray  # when the strap reports an RR interval
+    rr_s: np.ndarray  # reported RR (s), including missed/extra-beat artefacts
+    hr_t: np.ndarray
+    hr_bpm: np.ndarray  # 1 Hz heart rate as the strap reports it
+    model_hr: list[tuple[float, float]] = field(default_factory=list)
+
+
+class ParticipantSimulator:
+    def __init__(self, params: ParticipantParams, seed: int = 0, ecg_rate: float = 130.0,
+                 dt: float = 0.1, t0: float = 0.0, noise_mv: float = 0.01) -> None:
+        if ecg_rate <= 0:
+            raise ValueError(f"ecg_rate must be > 0, got {ecg_rate}")
+        self.p = params
+        self.kinetics = HeartRateKinetics(params, dt)
+        self.rng = np.random.default_rng(seed)
+        self.ecg_rate = ecg_rate
+        self.noise_mv = noise_mv
+        self.t0 = t0
+        self._steps = 0  # model time is t0 + steps * dt (no accumulated rounding)
+        self.activity = Activity()
+        self._ecg_index = 0  # next ECG sample: t0 + index / ecg_rate
+        self._hr_second = 1  # next 1 Hz HR report at t0 + _hr_second
+        rr0 = 60.0 / params.hr_rest
+        self._next_beat = t0 + float(self.rng.uniform(0.0, rr0))
+        self._interval = (self._next_beat - rr0, rr0)  # the beat interval the ECG is in
+        self._have_beat = False  # the first beat has no RR interval to report
+        self._lf_phase = float(self.rng.uniform(0, TWO_PI))
+        self._hf_phase = float(self.rng.uniform(0, TWO_PI))
+        self._pending_rr = 0.0  # a missed beat carries its interval into the next report
+        self._recent_rr: list[tuple[float, float]] = []
+
+    @property
+    def t(self) -> float:
+        return self.t0 + self._steps * self.kinetics.dt
+
+    @property
+    def hr(self) -> float:
+        return self.kinetics.hr
+
+    def set_activity(self, activity: Activity) -> None:
+        self.kinetics.set_activity(activity)
+        self.activity = activity
+
+    def _next_rr(self, hr: float, rr_mean: float) -> float:
+        x = self.kinetics.fraction_hrr
+        lf_share = 0.2 if x >= 0.7 else 0.5 + 0.3 * min(x / 0.5, 1.0)
+        hf_share = (1.0 - lf_share) * 0.8
+        noise_share = max(0.0, 1.0 - lf_share - hf_share)
+        self._lf_phase += TWO_PI * 0.1 * rr_mean
+        self._hf_phase += TWO_PI * breathing_rate(x) * rr_mean
+        wobble = (math.sqrt(2 * lf_share) * math.sin(self._lf_phase)
+                  + math.sqrt(2 * hf_share) * math.sin(self._hf_phase)
+                  + math.sqrt(noise_share) * float(self.rng.standard_normal()))
+        return max(0.25, rr_mean + rr_sd(self.p, hr) * wobble)
+
+    def advance(self, t_end: float) -> SimulatorOutput:
+        """Run the model up to ``t_end`` and return every sample that became due."""
+        beats: list[float] = []
+        intervals: list[tuple[float, float]] = [self._interval]
+        rr_t: list[float] = []
+        rr_s: list[float] = []
+        hr_t: list[float] = []
+        hr_v: list[float] = []
+        model_hr: list[tuple[float, float]] = []
+        dt = self.kinetics.dt
+        while self.t0 + (self._steps + 1) * dt <= t_end + 1e-9:
+            hr = self.kinetics.step()
+            self._steps += 1
+            model_hr.append((self.t, hr))
+            while self._next_beat <= self.t:
+                beat = self._next_beat
+                beats.append(beat)
+                if self._have_beat:
+                    self._report_rr(beat, beat - self._interval[0], rr_t, rr_s)
+                self._have_beat = True
+                rr = self._next_rr(hr, 60.0 / hr)
+                self._next_beat = beat + rr
+                self._interval = (beat, rr)
+                intervals.append(self._interval)
+            while self.t0 + self._hr_second <= self.t:
+                when = self.t0 + self._hr_second
+                hr_t.append(when)
+                hr_v.append(self._reported_hr(when, hr))
+                self._hr_second += 1
+        ecg_t, ecg_v = self._ecg_until(self.t, intervals)
+        return SimulatorOutput(ecg_t, ecg_v, np.array(beats), np.array(rr_t), np.array(rr_s),
+                               np.array(hr_t), np.array(hr_v), model_hr)
+
+    def _report_rr(self, when: float, rr: float, rr_t: list[float], rr_s: list[float]) -> None:
+        """What the strap reports: mostly the true interval, sometimes a missed or extra beat."""
+        u = float(self.rng.random())
+        total = self._pending_rr + rr
+        if u < self.p.artefact_rate / 2 and self._pending_rr == 0.0:
+            self._pending_rr = total  # missed: merged into the next report
+            return
+        self._pending_rr = 0.0
+        # An extra beat splits the interval in two.
+        reports = [total / 2.0, total / 2.0] if u < self.p.artefact_rate else [total]
+        for r in reports:
+            rr_t.append(when)
+            rr_s.append(r)
+            self._recent_rr.append((when, r))
+        self._recent_rr = [(w, r) for w, r in self._recent_rr if w > when - 5.0]
+
+    def _reported_hr(self, when: float, model_hr: float) -> float:
+        recent = [r for w, r in self._recent_rr if w > when - 3.0]
+        return 60.0 / float(np.mean(recent)) if recent else model_hr
+
+    def _ecg_until(self, t_end: float, intervals: list[tuple[float, float]]) -> tuple[np.ndarray, np.ndarray]:
+        last = math.floor((t_end - self.t0) * self.ecg_rate + 1e-9)
+        idx = np.arange(self._ecg_index, last + 1)
+        self._ecg_index = last + 1
+        t = self.t0 + idx / self.ecg_rate
+        out = np.empty_like(t)
+        starts = np.array([s for s, _ in intervals])
+        which = np.searchsorted(starts, t, side="right") - 1
+        for k in np.unique(which):
+            mask = which == k
+            start, rr = intervals[max(int(k), 0)]
+            out[mask] = ecg_waveform(t[mask], start, rr)
+        x = self.kinetics.fraction_hrr
+        out += 0.05 * np.sin(TWO_PI * breathing_rate(x) * t)  # respiratory baseline wander
+        out += self.rng.normal(0.0, self.noise_mv, size=t.shape)
+        return t, out

@@ -1,0 +1,181 @@
+"""A simulated exercise participant: demand -> heart-rate kinetics (PARTICIPANT_MODEL.md).
+
+Demand comes from what the robot asks for (activity, music tempo, gesture
+speed) through the ACSM stepping equation; heart rate follows it with a fast
+(neural) and a slow component with dead time, plus cardiac drift. Parameters
+marked "assumed" in PARTICIPANT_MODEL.md are fields here so studies can sweep them.
+No clock is read: the caller advances the model by explicit time steps.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+REST_VO2 = 3.5  # ml/kg/min, one MET
+
+#: Activities of the exercise routine, by the gesture name the robot plays.
+STEPPING = {"step_up", "lateral", "arms_forward"}
+MARCHING = {"marching"}
+SEATED = {"base", "rest", "seated", ""}
+
+
+@dataclass(frozen=True)
+class ParticipantParams:
+    age: float = 33.0
+    female: bool = False
+    hr_rest: float = 82.0
+    hr_max_true: float = 185.0
+    vo2max: float = 38.0  # ml/kg/min
+    step_height: float = 0.15  # m (H)
+    tempo_compliance: float = 0.6  # rho in [0.3, 1]
+    gesture_gain: float = 0.25  # gamma in [0, 0.5] (assumed)
+    marching_mets: float = 3.5  # at 120 BPM (assumed)
+    arm_work: float = 0.10  # extra effort with both arms forward (Olson 1991)
+    tau_fast: float = 10.0  # s
+    tau_on: float = 60.0  # s
+    tau_off: float = 75.0  # s
+    dead_time: float = 8.0  # s
+    drift_amplitude: float = 0.06  # A_d, fraction of HRR
+    tau_drift: float = 1500.0  # s
+    calibration_offset: float = 3.0  # bpm, seated anticipation (assumed)
+    sdnn_rest: float = 0.045  # s
+    artefact_rate: float = 0.005  # missed or extra beats in the reported RR
+
+    def validate(self) -> None:
+        problems = []
+        if not 0 < self.age <= 120:
+            problems.append(f"age must be in (0, 120], got {self.age}")
+        if not 30 <= self.hr_rest < self.hr_max_true:
+            problems.append(f"need 30 <= hr_rest < hr_max_true, got {self.hr_rest} / {self.hr_max_true}")
+        if self.vo2max <= REST_VO2:
+            problems.append(f"vo2max must exceed {REST_VO2} ml/kg/min, got {self.vo2max}")
+        for name in ("tau_fast", "tau_on", "tau_off", "tau_drift"):
+            if getattr(self, name) <= 0:
+                problems.append(f"{name} must be > 0 s")
+        if self.dead_time < 0:
+            problems.append("dead_time must be >= 0 s")
+        if not 0 <= self.tempo_compliance <= 1:
+            problems.append(f"tempo_compliance must be in [0, 1], got {self.tempo_compliance}")
+        if problems:
+            raise ValueError("invalid participant: " + "; ".join(problems))
+
+
+def sample_population(n: int, seed: int, age_range: tuple[float, float] = (20.0, 50.0)
+                      ) -> list[ParticipantParams]:
+    """A seeded cohort drawn from the distributions of PARTICIPANT_MODEL.md."""
+    rng = np.random.default_rng(seed)
+    people = []
+    for _ in range(n):
+        age = rng.uniform(*age_range)
+        female = bool(rng.random() < 0.5)
+        fitness = rng.uniform(0.75, 1.3)
+        hr_max = 208.0 - 0.7 * age + rng.normal(0.0, 7.0)
+        # Fitter people rest lower: shift the resting HR by fitness.
+        hr_rest = float(np.clip(rng.normal(72.0, 9.0) - 10.0 * (fitness - 1.0), 50.0, 100.0))
+        vo2max = (47.0 - 0.35 * (age - 20.0)) * (0.82 if female else 1.0) * fitness
+        people.append(ParticipantParams(
+            age=age, female=female, hr_rest=hr_rest, hr_max_true=hr_max, vo2max=vo2max,
+            step_height=rng.uniform(0.10, 0.20), tempo_compliance=rng.uniform(0.3, 1.0),
+            gesture_gain=rng.uniform(0.0, 0.5),
+            tau_on=float(np.clip(rng.normal(60.0, 20.0), 20.0, 120.0)),
+            tau_off=float(np.clip(rng.normal(75.0, 20.0), 25.0, 140.0)),
+            drift_amplitude=rng.uniform(0.03, 0.12),
+            sdnn_rest=float(np.clip(rng.normal(0.045, 0.015), 0.015, 0.09)),
+            calibration_offset=rng.normal(3.0, 3.0),
+        ))
+    return people
+
+
+@dataclass(frozen=True)
+class Activity:
+    """What the participant is doing: the robot's gesture, its speed, the music tempo."""
+
+    name: str = "rest"
+    tempo_bpm: float = 120.0
+    gesture_speed: float = 1.0
+
+    def with_(self, **changes: object) -> Activity:
+        return replace(self, **changes)  # type: ignore[arg-type]
+
+
+def net_vo2(p: ParticipantParams, activity: Activity) -> float:
+    """Oxygen cost above rest (ml/kg/min) of an activity for this participant."""
+    if activity.name in SEATED:
+        return 0.0
+    cadence = 120.0 + p.tempo_compliance * (activity.tempo_bpm - 120.0)
+    if activity.name in MARCHING:
+        net = (p.marching_mets - 1.0) * REST_VO2 * cadence / 120.0
+    elif activity.name in STEPPING:
+        f = cadence / 4.0  # one cycle (up-up-down-down) = 4 beats
+        net = 0.2 * f + 1.33 * 1.8 * p.step_height * f
+        if activity.name == "arms_forward":
+            net *= 1.0 + p.arm_work
+    else:
+        raise ValueError(f"unknown activity {activity.name!r}")
+    return net * max(0.0, 1.0 + p.gesture_gain * (activity.gesture_speed - 1.0))
+
+
+def demand(p: ParticipantParams, activity: Activity) -> float:
+    """Demand u as a fraction of the oxygen-uptake reserve (~ fraction of HRR, ACSM)."""
+    return net_vo2(p, activity) / (p.vo2max - REST_VO2)
+
+
+class HeartRateKinetics:
+    """Two parallel first-order components (fast neural, slow with dead time) plus drift."""
+
+    def __init__(self, params: ParticipantParams, dt: float = 0.1) -> None:
+        params.validate()
+        if dt <= 0:
+            raise ValueError(f"dt must be > 0, got {dt}")
+        self.p = params
+        self.dt = dt
+        self.x_fast = 0.0
+        self.x_slow = 0.0
+        self.x_drift = 0.0
+        self.u = 0.0
+        self.seated = True
+        # Demand history for the slow component's dead time.
+        self._delay: deque[float] = deque([0.0] * (round(params.dead_time / dt) + 1))
+
+    @property
+    def fraction_hrr(self) -> float:
+        return self.x_fast + self.x_slow + self.x_drift
+
+    @property
+    def hr(self) -> float:
+        p = self.p
+        hr = p.hr_rest + self.fraction_hrr * (p.hr_max_true - p.hr_rest)
+        if self.seated:
+            hr += p.calibration_offset
+        return min(hr, p.hr_max_true)
+
+    def set_activity(self, p_activity: Activity) -> None:
+        self.u = demand(self.p, p_activity)
+        self.seated = p_activity.name in SEATED
+
+    def step(self) -> float:
+        """Advance by dt; returns the heart rate (bpm) at the end of the step."""
+        p, dt, u = self.p, self.dt, self.u
+        self._delay.append(u)
+        u_delayed = self._delay.popleft()
+        self.x_fast += dt * (0.35 * u - self.x_fast) / p.tau_fast
+        target = 0.65 * u_delayed
+        tau = p.tau_on if target > self.x_slow else p.tau_off
+        self.x_slow += dt * (target - self.x_slow) / tau
+        drive = p.drift_amplitude * max(0.0, (u - 0.3) / 0.4)
+        self.x_drift += dt * (drive - self.x_drift) / p.tau_drift
+        return self.hr
+
+
+def breathing_rate(fraction_hrr: float) -> float:
+    """Breathing frequency (Hz): about 0.25 at rest rising to about 0.6 at high intensity."""
+    return 0.25 + 0.35 * min(max(fraction_hrr, 0.0), 1.0)
+
+
+def rr_sd(p: ParticipantParams, hr: float) -> float:
+    """SD of RR (s): halves for every +20 bpm above rest (Mongin 2022)."""
+    return p.sdnn_rest * math.pow(2.0, -(hr - p.hr_rest) / 20.0)

@@ -1,0 +1,374 @@
+"""qt_physio_coach as a ROS 2 node: CLI, start/stop, and the whole session under sim time.
+
+The integration test runs the robot side as a researcher would (qt_controller +
+mock_qt_robot, all on sim time) with the coach, publishes /clock and scripted HR frames
+itself, and checks what the mock robot actually did.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from helpers import NodeProcess, wait_until
+
+pytestmark = pytest.mark.ros
+
+BIN = Path(sys.prefix) / "bin"
+SIM_START = 1000.0
+
+
+def run(*args: str, timeout: float = 30) -> subprocess.CompletedProcess:
+    return subprocess.run([str(BIN / "qt_physio_coach"), *args], capture_output=True, text=True,
+                          timeout=timeout, env=dict(os.environ), stdin=subprocess.DEVNULL)
+
+
+# --- command line -------------------------------------------------------------------------------
+def test_help() -> None:
+    c = run("--help")
+    assert c.returncode == 0, c.stderr
+    for fragment in ("--interactive", "--conf", "--policy", "hr_topic", "/physio/polar_h10/hr", "part_age",
+                     "use_sim_time"):
+        assert fragment in c.stdout, fragment
+
+
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (["--ros-args", "-p", "part_age:=0.0"], "part_age must be in (0, 120] years, got 0"),
+        (["--ros-args", "-p", "part_age:=130"], "part_age must be in (0, 120] years, got 130"),
+        (["--ros-args", "-p", "zone_low:=0.8"], "zone bounds out of order"),
+        (["--ros-args", "-p", "policy:=pid"], "unknown policy 'pid'"),
+        (["--conf", "EMPTY_LADDER"], "empty speed ladder"),
+        (["--conf", "/nonexistent/coach.yaml"], "configuration file /nonexistent/coach.yaml does not exist"),
+        (["--ros-args", "-p", "routine_file:=/nonexistent/routine.yaml"], "does not exist"),
+        (["--ros-args", "-p", "tick_period:=0.0"], "tick_period must be > 0"),
+    ],
+)
+def test_invalid_configuration_is_one_clear_line(args: list[str], message: str, tmp_path: Path) -> None:
+    if "EMPTY_LADDER" in args:
+        conf = tmp_path / "coach.yaml"
+        conf.write_text("speed_modifier: []\naudio_suffix: []\n")
+        args = [str(conf) if a == "EMPTY_LADDER" else a for a in args]
+    c = run(*args)
+    assert c.returncode == 2, (c.stdout, c.stderr)
+    lines = c.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("qt_physio_coach: error: "), c.stderr
+    assert message in lines[0] and "Traceback" not in c.stderr
+
+
+def test_hr_frames_decode_with_optional_flag_channel() -> None:
+    import numpy as np
+
+    from hri_physio_bridge.frames import Frame, frame_to_msg
+    from hri_physio_coach.nodes.qt_physio_coach import hr_samples
+
+    one = frame_to_msg(Frame(np.array([12.5]), np.array([[131.0]]), ("hr",)))
+    assert hr_samples(one) == [(12.5, 131.0, False)]
+    values = np.array([[0.0, 120.0], [1.0, 80.0]])
+    flagged = frame_to_msg(Frame(np.array([1.0, 2.0]), values, ("flag", "bpm")))
+    assert hr_samples(flagged) == [(1.0, 120.0, False), (2.0, 80.0, True)]
+
+
+# --- a probe on the test side -------------------------------------------------------------------
+class Probe:
+    """Publishes /clock and HR frames; collects coach events, commands, replies and mock events."""
+
+    def __init__(self, context: Any, hr_topic: str) -> None:
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.node import Node
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+        from rosgraph_msgs.msg import Clock
+        from std_msgs.msg import Float64MultiArray, String
+
+        from hri_physio_bridge.streamers.ros import frame_qos
+
+        self.node = Node("coach_test_probe", context=context)
+        self.clock_pub = self.node.create_publisher(Clock, "/clock", 10)
+        self.hr_pub = self.node.create_publisher(Float64MultiArray, hr_topic, frame_qos())
+        self.control = self.node.create_publisher(String, "/coach/control", 10)
+        self.input = self.node.create_publisher(String, "/QtController/input", 10)
+        self.lock = threading.Lock()
+        self.coach_events: list[dict[str, Any]] = []
+        self.mock_events: list[dict[str, Any]] = []
+        self.commands: list[str] = []
+        self.replies: list[dict[str, Any]] = []
+        self.node.create_subscription(String, "/coach/events", self._add(self.coach_events, True), 5000)
+        self.node.create_subscription(String, "/qt_robot/mock/events", self._add(self.mock_events, True),
+                                      5000)
+        self.node.create_subscription(String, "/QtController/input", self._add(self.commands, False), 5000)
+        self.node.create_subscription(String, "/QtController/output", self._add(self.replies, True), 5000)
+        self.states: list[dict[str, Any]] = []
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.node.create_subscription(String, "/coach/state", self._add(self.states, True), latched)
+        self.executor = SingleThreadedExecutor(context=context)
+        self.executor.add_node(self.node)
+        self._running = True
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread.start()
+        self._clock_cls = Clock
+
+    def _add(self, into: list, parse: bool):
+        def callback(msg: Any) -> None:
+            with self.lock:
+                into.append(json.loads(msg.data) if parse else msg.data)
+        return callback
+
+    def _spin(self) -> None:
+        while self._running:
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def publish_clock(self, t: float) -> None:
+        msg = self._clock_cls()
+        msg.clock.sec = int(t)
+        msg.clock.nanosec = min(round((t - int(t)) * 1e9), 999_999_999)
+        self.clock_pub.publish(msg)
+
+    def publish_hr(self, t: float, bpm: float) -> None:
+        import numpy as np
+
+        from hri_physio_bridge.frames import Frame, frame_to_msg
+
+        self.hr_pub.publish(frame_to_msg(Frame(np.array([t]), np.array([[bpm]]), ("hr",))))
+
+    def command(self, line: str) -> None:
+        from std_msgs.msg import String
+
+        # Subscribers: this probe and qt_controller.
+        wait_until(lambda: self.input.get_subscription_count() >= 2, 30, "qt_controller's input")
+        self.input.publish(String(data=line))
+
+    def events(self, kind: str, source: str = "coach") -> list[dict[str, Any]]:
+        with self.lock:
+            pool = self.coach_events if source == "coach" else self.mock_events
+            return [e for e in pool if e["event"] == kind]
+
+    def close(self) -> None:
+        self._running = False
+        self._thread.join(2.0)
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+
+
+@pytest.fixture
+def probe(ros_context: Any) -> Any:
+    p = Probe(ros_context, "/test/coach/hr")
+    try:
+        yield p
+    finally:
+        p.close()
+
+
+# --- start and stop -----------------------------------------------------------------------------
+def test_interactive_waits_for_start_on_stdin_and_stops_on_sigterm(probe: Probe) -> None:
+    with NodeProcess("qt_physio_coach", "--interactive", "--ros-args", "-p", "hr_topic:=/test/coach/hr",
+                     stdin=subprocess.PIPE) as coach:
+        coach.wait_for_output("waiting for 'start'")
+        wait_until(lambda: probe.node.count_subscribers("/coach/control") > 0, 20, "the coach to subscribe")
+        time.sleep(1.0)
+        assert not probe.events("session_start"), "started before 'start'"
+        assert coach.proc.stdin is not None
+        coach.proc.stdin.write("start\n")
+        coach.proc.stdin.flush()
+        wait_until(lambda: probe.events("session_start"), 20, "session_start after 'start' on stdin")
+        wait_until(lambda: probe.events("activity"), 20, "the first activity")
+        wait_until(lambda: probe.states, 20, "a state on /coach/state")
+        state = probe.states[-1]
+        where = (state["state"], state["phase"], state["activity"])
+        assert where == ("running", "calibration", "seated_rest")
+        assert state["participant"] == probe.events("session_start")[0]["participant"]
+        assert (state["ladder_speed"], state["ladder_tempo"], state["policy"]) == (0.95, 115.0, "threshold")
+        assert coach.stop(signal.SIGTERM) == 0, coach.output
+        wait_until(lambda: probe.events("session_stopped"), 10, "the session_stopped event")
+        assert probe.events("session_stopped")[0]["reason"] == "signal"
+        assert "Traceback" not in coach.output
+
+
+def test_start_on_the_control_topic_and_sigint(probe: Probe) -> None:
+    from std_msgs.msg import String
+
+    args = ("--interactive", "--ros-args", "-p", "hr_topic:=/test/coach/hr")
+    with NodeProcess("qt_physio_coach", *args) as coach:
+        coach.wait_for_output("waiting for 'start'")
+        wait_until(lambda: probe.control.get_subscription_count() > 0, 20, "the coach to subscribe")
+        probe.control.publish(String(data="start"))
+        wait_until(lambda: probe.events("session_start"), 20, "session_start after 'start' on /coach/control")
+        assert coach.stop(signal.SIGINT) == 0, coach.output
+        assert "Traceback" not in coach.output
+
+
+# --- the whole session under sim time ------------------------------------------------------------
+STEP = 0.25  # s of sim time per /clock message: <= every listening node's timer period
+SPEEDUP = 36.0  # sim seconds per wall second: 23 min in ~38 s
+WARM, COND, COOL, END = 180.0, 480.0, 1080.0, 1380.0
+
+
+def scripted_hr(rel: float) -> float:
+    """Seated 85.4, below the zone in the warm-up, in it in conditioning, above it in the cool-down."""
+    if rel < WARM + 5:  # a margin: a late sample of the warm-up must not count as resting
+        return 85.4
+    if rel < COND:
+        return 110.0
+    if rel < COOL:
+        return 140.0
+    return 165.0
+
+
+def drive_clock(probe: Probe, stop: threading.Event, t0_holder: dict[str, float]) -> None:
+    """/clock at SPEEDUP x real time in STEP increments; one HR frame per sim second."""
+    t = SIM_START
+    next_hr = SIM_START + 0.5
+    wall0 = time.monotonic()
+    k = 0
+    while not stop.is_set():
+        k += 1
+        t = SIM_START + k * STEP
+        probe.publish_clock(t)
+        while next_hr <= t:
+            t0 = t0_holder.get("t0")
+            probe.publish_hr(next_hr, scripted_hr(next_hr - t0) if t0 is not None else 85.4)
+            next_hr += 1.0
+        t0_holder["now"] = t
+        delay = wall0 + k * STEP / SPEEDUP - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+
+
+def expected_gestures() -> list[tuple[str, float]]:
+    """The gestures the robot must play: the routine with the ladder moved by the scripted HR."""
+    out = [("base", 0.5), ("marching", 0.95)]
+    out += [("marching", s) for s in (1.00, 1.05, 1.10, 1.15)]  # four speed-ups in the warm-up
+    out += [("step_up", 1.15)]
+    out += [(g, 1.15) for g in ("marching", "lateral", "marching", "arms_forward", "marching", "lateral",
+                                "marching")]  # conditioning: in zone, no change
+    out += [("step_up", 1.15), ("step_up", 1.10), ("step_up", 1.05), ("step_up", 1.00),
+            ("step_up", 0.95)]  # cool-down: slow down (the update at 1200 s precedes the activity change)
+    out += [("marching", 0.95), ("marching", 0.90)]
+    return out
+
+
+def expected_audio() -> list[str]:
+    tempo = [115, 120, 125, 130, 135] + [135] * 9 + [130, 125, 120, 115, 115, 110]
+    return ["./audio/relaxing.wav"] + [f"./audio/exercise_{t}.wav" for t in tempo] + ["./audio/relaxing.wav"]
+
+
+def expected_videos() -> list[str]:
+    videos = ["marching", "step_up", "marching", "lateral", "marching", "arms_forward", "marching", "lateral",
+              "marching", "step_up", "marching"]
+    out = ["./video/relaxing.mp4", "./video/splash.mp4"]
+    for v in videos:
+        out += [f"./video/{v}.mp4", "./video/splash.mp4"]
+    return [*out, "./video/splash.mp4"]
+
+
+def test_whole_session_under_sim_time_with_the_robot_side(probe: Probe) -> None:
+    from std_msgs.msg import String
+
+    sim = ["-p", "use_sim_time:=true"]
+    mock = NodeProcess("mock_qt_robot", "--ros-args", *sim, "-p", "joint_state_rate:=4.0")
+    controller = NodeProcess("qt_controller", "--ros-args", *sim)
+    coach = NodeProcess("qt_physio_coach", "--interactive", "--ros-args", *sim, "-p", "tick_period:=0.25",
+                        "-p", "hr_topic:=/test/coach/hr", "-p", "part_age:=33.0", "-p", "part_name:=Pilot",
+                        "-p", "hr_timeout:=30.0", "-p", "seed:=3")
+    stop = threading.Event()
+    times: dict[str, float] = {}
+    driver = threading.Thread(target=drive_clock, args=(probe, stop, times), daemon=True)
+    with mock, controller, coach:
+        for proc, text in ((mock, "mock QT robot"), (controller, "listening for commands"),
+                           (coach, "participant P-")):
+            proc.wait_for_output(text, timeout=30)
+        wait_until(lambda: probe.clock_pub.get_subscription_count() >= 3
+                   and probe.hr_pub.get_subscription_count() >= 1
+                   and probe.node.count_publishers("/qt_robot/mock/events") >= 1, 30, "discovery")
+        driver.start()
+        try:
+            # Make sure the robot side works end to end and its events reach us before the session
+            # starts: a probe command, repeated until the mock reports it (discovery takes a while).
+            deadline, sent = time.monotonic() + 60, 0
+            while not probe.events("volume", "mock"):
+                assert time.monotonic() < deadline, "the mock's events never reached the probe"
+                probe.command("set volume 60")
+                sent += 1
+                time.sleep(2.0)
+            wait_until(lambda: len(probe.events("volume", "mock")) == sent and len(probe.replies) >= sent, 30,
+                       "the probe commands to be done")
+            with probe.lock:
+                probe.commands.clear()
+                probe.replies.clear()
+                probe.mock_events.clear()
+            wall0 = time.monotonic()
+            probe.control.publish(String(data="start"))
+            wait_until(lambda: probe.events("session_start"), 30, "the session to start on sim time")
+            t0 = probe.events("session_start")[0]["t"]
+            times["t0"] = t0
+            assert coach.wait(timeout=90) == 0, coach.output
+            wall = time.monotonic() - wall0
+            # Let the robot side catch up with the last commands (speech queued, media).
+            def final_speech() -> bool:
+                speech = probe.events("speech_queued", "mock") + probe.events("speech_started", "mock")
+                return any("Congratulations" in e.get("text", "") for e in speech)
+
+            wait_until(final_speech, 30, "the final speech at the mock")
+        finally:
+            stop.set()
+            driver.join(5.0)
+        assert wall <= 60.0, f"the 23-min session took {wall:.1f} s of wall time"
+        assert mock.stop() == 0 and controller.stop() == 0
+    output = coach.output
+    assert "Traceback" not in output and "Pilot" not in output  # the log carries the id, not the name
+
+    # --- the coach's own record: exact times relative to the start ---
+    rel = lambda e: round(e["t"] - t0, 6)  # noqa: E731
+    assert [(rel(e), e["phase"]) for e in probe.events("phase")] == [
+        (0.0, "calibration"), (WARM, "warm_up"), (COND, "conditioning"), (COOL, "cool_down")]
+    assert [rel(e) for e in probe.events("activity")] == [
+        0.0, 180.0, 360.0, 480.0, 540.0, 660.0, 720.0, 840.0, 900.0, 1020.0, 1080.0, 1200.0]
+    assert [rel(e) for e in probe.events("session_end")] == [END]
+    rules = probe.events("rule_update")
+    assert [rel(e) for e in rules] == [WARM + 30.0 * k for k in range(1, 40)]
+    behaviours = [rel(e) for e in probe.events("behaviour") if e["kind"] != "reminder"]
+    slots = [WARM + 20.0 * k for k in range(1, 60)]
+    assert behaviours == [t for t in slots if (t - WARM) % 60]
+    zone = probe.events("zone")[0]
+    assert zone["hr_rest"] == pytest.approx(85.4) and zone["low"] == pytest.approx(125.2, abs=0.051)
+    actions = [e["decision"]["action"] for e in rules]
+    assert actions[:4] == ["speed_up"] * 4
+    assert [a for a in actions if a == "slow_down"] == ["slow_down"] * 5
+    assert "gated" not in actions and not probe.events("hr_lost")
+    assert not probe.events("command_failed")
+    assert all(e["participant"] == zone["participant"] for e in probe.coach_events)
+
+    # --- what went on /QtController/input is what the coach logged, in order ---
+    logged = [e["command"] for e in probe.events("command")]
+    with probe.lock:
+        sent = list(probe.commands)
+    assert sent == logged
+    with probe.lock:
+        replies = list(probe.replies)
+    assert len(replies) == len(sent) and all(r["ok"] for r in replies), [r for r in replies if not r["ok"]]
+
+    # --- what the mock robot did ---
+    gestures = [(e["name"], round(e["speed"], 2)) for e in probe.events("gesture_started", "mock")]
+    assert gestures == expected_gestures()
+    assert [e["name"] for e in probe.events("audio", "mock")] == expected_audio()
+    assert [e["name"] for e in probe.events("video", "mock")] == expected_videos()
+    assert [e["volume"] for e in probe.events("volume", "mock")] == [60]
+    said = {e["text"] for kind in ("speech_started", "speech_queued") for e in probe.events(kind, "mock")}
+    spoken = [c.removeprefix("set speech ") for c in sent if c.startswith("set speech ")]
+    assert set(spoken) <= said
+    announcement = next(s for s in spoken if "resting heart rate" in s)
+    assert "85.4" in announcement and "125.2" in announcement and "155.1" in announcement
+    assert "QT/happy" in {e["name"] for e in probe.events("emotion_started", "mock")}
+    # The robot acted on ROS time: the warm-up's first video within a few sim seconds of 180 s.
+    first_video = next(e for e in probe.events("video", "mock") if e["name"] == "./video/marching.mp4")
+    assert 0.0 <= first_video["t"] - (t0 + WARM) < 10.0
