@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hri_physio_processing.quality import templatematch_quality
 from hri_physio_processing.signal_checks import Flag, check_rate, check_values
 
 MODES = ("ecg", "ppg", "eda")
@@ -169,6 +170,8 @@ def _ecg(x: np.ndarray, cfg: FeatureSettings) -> WindowResult:
     def quality() -> float:
         if cfg.quality_method == "none":
             return math.nan
+        if cfg.quality_method == "templatematch":  # NeuroKit2's method, without its pandas cost
+            return float(np.mean(templatematch_quality(clean, peaks, fs)))
         q = nk.ecg_quality(clean, rpeaks=peaks, sampling_rate=fs, method=cfg.quality_method,
                            **({"approach": "fuzzy"} if cfg.quality_method == "zhao2018" else {}))
         return ZHAO_SCORES[q] if isinstance(q, str) else float(np.mean(q))
