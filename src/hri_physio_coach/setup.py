@@ -25,6 +25,7 @@ setup(
         "console_scripts": [
             "qt_physio_coach = hri_physio_coach.nodes.qt_physio_coach:main",
             "simulated_participant = hri_physio_coach.nodes.simulated_participant:main",
+            "hri_physio_session = hri_physio_coach.session:main",
         ],
     },
 )

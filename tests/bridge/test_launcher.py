@@ -63,3 +63,31 @@ def test_stop_sends_sigint_first_and_escalates(on_path: Path) -> None:
 def test_missing_console_script_is_named() -> None:
     with pytest.raises(FileNotFoundError, match="console script 'no_such_node' not found"):
         find_executable("no_such_node")
+
+
+def test_children_are_stopped_when_the_launcher_is_killed(on_path: Path, tmp_path: Path) -> None:
+    import signal
+    import subprocess
+    import time
+
+    pid_file = tmp_path / "child.pid"
+    script(on_path, "sleepy_node", (
+        "import os, time\n"
+        f"open({str(pid_file)!r}, 'w').write(str(os.getpid()))\n"
+        "while True: time.sleep(0.05)\n"))
+    launcher = subprocess.Popen([sys.executable, "-c", (
+        "import os, time\n"
+        "from hri_physio_bridge.launcher import ProcessGroup\n"
+        "ProcessGroup().start('sleepy', 'sleepy_node', env=dict(os.environ))\n"
+        "while True: time.sleep(0.05)\n")], env=dict(os.environ))
+    deadline = time.monotonic() + 20
+    while not (pid_file.exists() and pid_file.read_text()):
+        assert time.monotonic() < deadline and launcher.poll() is None
+        time.sleep(0.02)
+    child = int(pid_file.read_text())
+    launcher.send_signal(signal.SIGKILL)  # no chance to stop anything itself
+    launcher.wait(10)
+    deadline = time.monotonic() + 10
+    while Path(f"/proc/{child}").exists() and "Z" not in Path(f"/proc/{child}/stat").read_text().split()[2]:
+        assert time.monotonic() < deadline, "the child outlived its launcher"
+        time.sleep(0.02)

@@ -8,6 +8,8 @@ grace period, so nodes can flush their logs and bags.
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import os
 import shutil
 import signal
@@ -32,6 +34,20 @@ def find_executable(name: str) -> str:
             f"console script {name!r} not found (is the project installed? run scripts/setup)"
         )
     return found
+
+
+def _die_with_parent() -> None:
+    """In the child, before exec: be sent SIGTERM if the launcher dies (Linux), even by SIGKILL.
+
+    Children run in their own session (so one Ctrl-C is not delivered twice), which also means
+    nothing else would stop them if the launcher were killed.
+    """
+    with contextlib.suppress(OSError, AttributeError):
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
+PR_SET_PDEATHSIG = 1
 
 
 @dataclass
@@ -65,6 +81,7 @@ class ProcessGroup:
             argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
             env=env if env is not None else dict(os.environ), text=True, bufsize=1,
             start_new_session=True,  # our Ctrl-C is forwarded by stop(), not delivered twice
+            preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None,
         )
         managed = ManagedProcess(name, argv, proc, threading.Thread())
         managed.reader = threading.Thread(target=self._pump, args=(managed, echo), daemon=True)

@@ -58,12 +58,13 @@ class SimulatedParticipantNode(Node):
         prefix = f"{prefix.rstrip('/')}/" if prefix else ""
         rate = float(self.get_parameter("ecg_rate").value)
 
-        now = self._now()
-        self.sim = ParticipantSimulator(self.params, seed=int(self.get_parameter("seed").value),
-                                        ecg_rate=rate, t0=now)
-        # LSL timestamps: model (ROS) time shifted onto the LSL clock at start-up, so in real
-        # time they are ordinary LSL timestamps and under /clock they advance with sim time.
-        self.lsl_offset = pylsl.local_clock() - now
+        self.seed = int(self.get_parameter("seed").value)
+        self.ecg_rate = rate
+        # The model starts at the first tick with a valid ROS time: under use_sim_time that is
+        # 0 until the first /clock message, and starting then would make the first step jump
+        # from 0 to the clock's epoch.
+        self.sim: ParticipantSimulator | None = None
+        self.lsl_offset = 0.0
         self.observer = RobotObserver()
         self.outlets: dict[str, LslStreamer] = {}
         for kind, stream_rate, label in (("ECG", rate, "ECG"), ("HR", 1.0, "HR"), ("RR", 0.0, "RR")):
@@ -74,7 +75,7 @@ class SimulatedParticipantNode(Node):
         self.state_pub = self.create_publisher(String, "/participant/state", 10)
         self.create_subscription(String, self.get_parameter("command_topic").value, self._on_command, 100)
         self.create_timer(period, self._tick)
-        self._last_state = now
+        self._last_state = 0.0
         self.get_logger().info(
             f"participant (age {self.params.age:g}, HR rest {self.params.hr_rest:g}, HRmax "
             f"{self.params.hr_max_true:g}) streaming as PolarH10/{device} on LSL"
@@ -83,9 +84,20 @@ class SimulatedParticipantNode(Node):
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 
+    def _start_model(self, now: float) -> ParticipantSimulator:
+        self.sim = ParticipantSimulator(self.params, seed=self.seed, ecg_rate=self.ecg_rate, t0=now)
+        self.sim.set_activity(self.observer.activity)
+        # LSL timestamps: model (ROS) time shifted onto the LSL clock at start-up, so in real
+        # time they are ordinary LSL timestamps and under /clock they advance with sim time.
+        self.lsl_offset = pylsl.local_clock() - now
+        self._last_state = now
+        self.get_logger().info(f"model started at ROS time {now:.3f} s")
+        return self.sim
+
     def _on_command(self, msg: String) -> None:
         if self.observer.observe(msg.data):
-            self.sim.set_activity(self.observer.activity)
+            if self.sim is not None:
+                self.sim.set_activity(self.observer.activity)
             self.get_logger().info(f"now doing {self.observer.activity}")
 
     def _push(self, kind: str, t: np.ndarray, values: np.ndarray) -> None:
@@ -94,17 +106,20 @@ class SimulatedParticipantNode(Node):
 
     def _tick(self) -> None:
         now = self._now()
-        if now <= self.sim.t:
+        if now <= 0.0:
+            return  # use_sim_time and no /clock yet
+        sim = self.sim if self.sim is not None else self._start_model(now)
+        if now <= sim.t:
             return  # sim time paused or went backwards (a replay restarted): wait
-        out = self.sim.advance(now)
+        out = sim.advance(now)
         self._push("ECG", out.ecg_t, out.ecg_mv)
         self._push("HR", out.hr_t, out.hr_bpm)
         self._push("RR", out.rr_t, out.rr_s * 1000.0)
         if now - self._last_state >= 1.0:
             self._last_state = now
-            a = self.sim.activity
+            a = sim.activity
             self.state_pub.publish(String(data=json.dumps({
-                "t": now, "hr_model": self.sim.hr, "fraction_hrr": self.sim.kinetics.fraction_hrr,
+                "t": now, "hr_model": sim.hr, "fraction_hrr": sim.kinetics.fraction_hrr,
                 "activity": a.name, "tempo_bpm": a.tempo_bpm, "gesture_speed": a.gesture_speed,
             })))
 

@@ -1,0 +1,413 @@
+"""hri_physio_session: the whole closed loop on the built-in defaults, with no hardware.
+
+Starts, as separate processes (the console scripts a lab would run):
+
+* ``simulated_participant`` - a person on the step wearing a simulated Polar H10 (ECG, HR and
+  RR on LSL), whose heart rate follows the robot's gesture speed and music tempo;
+* ``physio_receiver`` x2 - LSL -> ROS 2 for HR (``/physio/polar_h10/hr``) and ECG;
+* ``neurokit_processor`` - ECG -> HR/HRV features (``/physio/polar_h10/ecg/...``);
+* ``qt_physio_coach`` - the exercise coach, adapting on the strap's HR (or the processor's);
+* ``qt_controller`` + ``mock_qt_robot`` - the robot side;
+* ``recorder`` - every topic into a rosbag2 (MCAP) directory.
+
+This process drives ``/clock`` (every node but the receivers, processor and recorder runs on
+sim time), so the 23-minute routine runs ``--speed`` times faster than real time (1 = real
+time). It waits until the robot side is up and heart rate flows into ROS 2, then sends
+``start`` to the coach, prints live progress, and when the coach ends the session stops every
+process cleanly (the recorder last) and prints a summary.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import math
+import signal
+import sys
+import threading
+import time
+import uuid
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from hri_physio_bridge.launcher import ProcessGroup
+
+HR_TOPIC = "/physio/polar_h10/hr"
+ECG_TOPIC = "/physio/polar_h10/ecg"
+ECG_HR_TOPIC = "/physio/polar_h10/ecg/hr"
+#: Sim seconds per /clock message: no larger than any sim-time node's timer period
+#: (coach tick, participant update and the mock's joint states below), or timers skip periods.
+CLOCK_STEP = 0.1
+EXERCISE_PHASES = ("warm_up", "conditioning", "cool_down")
+
+
+@dataclass
+class SessionView:
+    """What the launcher has seen of the session, from the ROS 2 topics."""
+
+    state: dict = field(default_factory=dict)
+    hr: float = math.nan
+    hr_samples: int = 0
+    model_hr: float = math.nan
+    zone: tuple[float, float] | None = None
+    events: dict[str, int] = field(default_factory=dict)
+    adaptations: int = 0
+    exercise_hr: int = 0
+    exercise_in_zone: int = 0
+    robot_actions: int = 0
+    started_at: float | None = None  # sim time of the coach's session_start / session_end
+    ended_at: float | None = None
+
+    def on_event(self, event: dict) -> None:
+        kind = str(event.get("event"))
+        self.events[kind] = self.events.get(kind, 0) + 1
+        if kind == "session_start":
+            self.started_at = float(event["t"])
+        elif kind == "session_end":
+            self.ended_at = float(event["t"])
+        elif kind == "zone":
+            self.zone = (float(event["low"]), float(event["high"]))
+        elif kind == "rule_update" and event.get("decision", {}).get("changed"):
+            self.adaptations += 1
+
+    def on_hr(self, bpm: float) -> None:
+        self.hr = bpm
+        self.hr_samples += 1
+        if self.zone is not None and self.state.get("phase_kind") in EXERCISE_PHASES:
+            self.exercise_hr += 1
+            self.exercise_in_zone += int(self.zone[0] <= bpm <= self.zone[1])
+
+    def progress(self, now: float) -> str:
+        t0 = self.started_at
+        elapsed = "--:--" if t0 is None else f"{int(now - t0) // 60:02d}:{int(now - t0) % 60:02d}"
+        where = "ended" if self.ended_at is not None else (
+            f"{self.state.get('phase') or 'waiting'}/{self.state.get('activity') or '-'}")
+        zone = f"{self.zone[0]:.0f}-{self.zone[1]:.0f}" if self.zone else "not yet"
+        speed = self.state.get("ladder_speed")
+        pace = f"speed {speed:.2f} tempo {self.state.get('ladder_tempo')}" if speed is not None else "pace -"
+        return (f"[session] {elapsed} {where:32s} HR {self.hr:5.1f} bpm (model {self.model_hr:5.1f})  "
+                f"zone {zone}  {pace}  adaptations {self.adaptations}  robot actions {self.robot_actions}")
+
+
+class ClockAndWatcher:
+    """Publishes /clock and watches the session's topics, on its own executor thread."""
+
+    def __init__(self, view: SessionView, hr_topic: str) -> None:
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+        from rosgraph_msgs.msg import Clock
+        from std_msgs.msg import Float64MultiArray, String
+
+        from hri_physio_bridge.frames import msg_to_frame
+        from hri_physio_bridge.streamers.ros import frame_qos
+
+        self._rclpy = rclpy
+        self._clock_cls = Clock
+        self._string_cls = String
+        self.view = view
+        self.lock = threading.Lock()
+        rclpy.init(args=None, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+        self.node = rclpy.create_node(f"session_launcher_{uuid.uuid4().hex[:4]}")
+        self.clock_pub = self.node.create_publisher(Clock, "/clock", 10)
+        self.control_pub = self.node.create_publisher(String, "/coach/control", 10)
+
+        def on_hr(msg: Float64MultiArray) -> None:
+            frame = msg_to_frame(msg)
+            with self.lock:
+                for bpm in frame.values[:, -1]:
+                    view.on_hr(float(bpm))
+
+        def on_json(apply: Callable[[dict], None]) -> Callable[[String], None]:
+            def callback(msg: String) -> None:
+                try:
+                    data = json.loads(msg.data)
+                except json.JSONDecodeError:
+                    return  # not ours to judge: the recorder keeps the raw message
+                with self.lock:
+                    apply(data)
+            return callback
+
+        def set_state(data: dict) -> None:
+            view.state = data
+
+        def set_model(data: dict) -> None:
+            view.model_hr = float(data.get("hr_model", math.nan))
+
+        def count_action(_data: dict) -> None:
+            view.robot_actions += 1
+
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.node.create_subscription(Float64MultiArray, hr_topic, on_hr, frame_qos())
+        self.node.create_subscription(String, "/coach/state", on_json(set_state), latched)
+        self.node.create_subscription(String, "/coach/events", on_json(view.on_event), 1000)
+        self.node.create_subscription(String, "/participant/state", on_json(set_model), 100)
+        self.node.create_subscription(String, "/qt_robot/mock/events", on_json(count_action), 1000)
+        self.executor = SingleThreadedExecutor()
+        self.executor.add_node(self.node)
+        self._running = True
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread.start()
+
+    def _spin(self) -> None:
+        while self._running:
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def publish_clock(self, t: float) -> None:
+        msg = self._clock_cls()
+        msg.clock.sec = int(t)
+        msg.clock.nanosec = min(round((t - int(t)) * 1e9), 999_999_999)
+        self.clock_pub.publish(msg)
+
+    def send_start(self) -> None:
+        self.control_pub.publish(self._string_cls(data="start"))
+
+    def count_subscribers(self, topic: str) -> int:
+        return self.node.count_subscribers(topic)
+
+    def close(self) -> None:
+        self._running = False
+        self._thread.join(2.0)
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+        self._rclpy.try_shutdown()
+
+
+class SimClock:
+    """Sim time advancing at ``speed`` x wall time, in steps of CLOCK_STEP sim seconds."""
+
+    def __init__(self, start: float, speed: float) -> None:
+        self.t = start
+        self.speed = speed
+        self._base = start
+        self._wall = time.monotonic()
+
+    def set_speed(self, speed: float) -> None:
+        """From now on, advance at ``speed`` (no jump: continues from the current value)."""
+        self._wall = time.monotonic()
+        self._base = self.t
+        self.speed = speed
+
+    def due_steps(self) -> list[float]:
+        """The clock values to publish now, to keep up with the wall clock."""
+        target = self._base + (time.monotonic() - self._wall) * self.speed
+        steps = []
+        while self.t + CLOCK_STEP <= target:
+            self.t += CLOCK_STEP
+            steps.append(self.t)
+        return steps
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="hri_physio_session",
+        description="The closed loop on the built-in defaults: simulated participant (Polar H10 on LSL) -> "
+        "physio_receiver -> qt_physio_coach -> qt_controller -> mock_qt_robot, recorded to a bag.",
+        epilog="Examples: hri_physio_session  |  hri_physio_session --speed 1 --policy fuzzy  |  "
+        "hri_physio_session --routine my_routine.yaml --no-record",
+    )
+    p.add_argument("--speed", type=float, default=30.0,
+                   help="sim seconds per wall second once the session starts (default 30: the 23-min "
+                        "routine in about 46 s; 1 = real time)")
+    p.add_argument("--policy", choices=("threshold", "fuzzy", "static"), default="threshold",
+                   help="adaptation policy (default threshold)")
+    p.add_argument("--age", type=float, default=33.0, help="participant age, years (default 33)")
+    p.add_argument("--participant-seed", type=int, default=1,
+                   help="seed of the simulated participant's variability (default 1)")
+    p.add_argument("--hr-source", choices=("strap", "ecg"), default="strap",
+                   help=f"coach input: the strap's HR ({HR_TOPIC}, default) or the processor's "
+                        f"HR from ECG ({ECG_HR_TOPIC})")
+    p.add_argument("--conf", type=Path, help="coach YAML file (default: the packaged coach.yaml)")
+    p.add_argument("--routine", type=Path, help="routine YAML file (default: the packaged routine)")
+    p.add_argument("--bag-dir", type=Path, default=Path("bags"),
+                   help="where the session's bag directory is created (default bags/)")
+    p.add_argument("--no-record", action="store_true", help="do not record a bag")
+    p.add_argument("--no-ecg", action="store_true", help="do not stream ECG into ROS 2 nor process it")
+    p.add_argument("--device-id", default="SIM0001", help="simulated Polar device id (default SIM0001)")
+    p.add_argument("--startup-timeout", type=float, default=60.0,
+                   help="wall seconds to wait for the nodes and the first heart rate (default 60)")
+    p.add_argument("--quiet-nodes", action="store_true", help="do not echo the nodes' own log lines")
+    p.add_argument("--progress-period", type=float, default=2.0,
+                   help="wall seconds between progress lines (default 2)")
+    return p
+
+
+def _check(args: argparse.Namespace) -> str | None:
+    if not (math.isfinite(args.speed) and args.speed > 0):
+        return f"--speed must be > 0, got {args.speed:g}"
+    if not 0 < args.age <= 120:
+        return f"--age must be in (0, 120] years, got {args.age:g}"
+    for name in ("conf", "routine"):
+        path = getattr(args, name)
+        if path is not None and not path.is_file():
+            return f"--{name} {path} does not exist"
+    if args.hr_source == "ecg" and args.no_ecg:
+        return "--hr-source ecg needs the ECG path: drop --no-ecg"
+    return None
+
+
+def start_nodes(group: ProcessGroup, args: argparse.Namespace, echo: bool) -> None:
+    sim = ["-p", "use_sim_time:=true"]
+    dev = args.device_id
+    if not args.no_record:
+        args.bag_dir.mkdir(parents=True, exist_ok=True)
+        group.start("recorder", "recorder", ["--output-dir", str(args.bag_dir), "--session-id", "session",
+                                             "--discovery-period", "0.2", "--status-period", "10"], echo=echo)
+    joint_rate = f"joint_state_rate:={1 / CLOCK_STEP:.1f}"
+    group.start("mock", "mock_qt_robot", ["--ros-args", *sim, "-p", joint_rate], echo=echo)
+    group.start("controller", "qt_controller", ["--ros-args", *sim], echo=echo)
+    group.start("participant", "simulated_participant", [
+        "--ros-args", *sim, "-p", f"age:={args.age:.1f}", "-p", f"seed:={args.participant_seed}",
+        "-p", f"device_id:={dev}", "-p", f"update_period:={CLOCK_STEP:.3f}"], echo=echo)
+    streams = [("HR", HR_TOPIC, 1, 1.0)]
+    if not args.no_ecg:
+        streams.append(("ECG", ECG_TOPIC, 13, 130.0))
+    for stream, topic, frame, rate in streams:
+        node = f"{stream.lower()}_receiver"
+        group.start(node, "physio_receiver", [
+            "--input", f"lsl:PolarH10/{dev}/{stream}", "--output", f"ros:{topic}",
+            "--output-frame", str(frame), "--sampling-rate", f"{rate:g}",
+            "--resolve-timeout", f"{args.startup_timeout:g}", "--ros-args", "-r", f"__node:={node}",
+        ], echo=echo)
+    if not args.no_ecg:
+        group.start("processor", "neurokit_processor", ["--input", f"ros:{ECG_TOPIC}"], echo=echo)
+    coach = ["--interactive", "--policy", args.policy]
+    if args.conf is not None:
+        coach += ["--conf", str(args.conf)]
+    hr_topic = ECG_HR_TOPIC if args.hr_source == "ecg" else HR_TOPIC
+    coach += ["--hr-topic", hr_topic, "--ros-args", *sim, "-p", f"part_age:={args.age:.1f}",
+              "-p", f"tick_period:={CLOCK_STEP:.3f}"]
+    if args.routine is not None:
+        coach += ["-p", f"routine_file:={args.routine.resolve()}"]
+    group.start("coach", "qt_physio_coach", coach, echo=echo)
+
+
+def wait_for_system(watcher: ClockAndWatcher, group: ProcessGroup, clock: SimClock, view: SessionView,
+                    stop: threading.Event, timeout: float) -> str | None:
+    """Run the clock at real time until the robot side listens and heart rate reaches ROS 2."""
+    deadline = time.monotonic() + timeout
+    ready_since: float | None = None
+    while not stop.is_set():
+        for t in clock.due_steps():
+            watcher.publish_clock(t)
+        dead = [p for p in group.procs if p.returncode is not None]
+        if dead:
+            tail = "\n".join(dead[0].lines[-5:])
+            return f"{dead[0].name} exited during start-up with code {dead[0].returncode}:\n{tail}"
+        with watcher.lock:
+            hr_flowing = view.hr_samples >= 2
+        ready = (hr_flowing and watcher.count_subscribers("/coach/control") >= 1
+                 and watcher.count_subscribers("/QtController/input") >= 2  # controller, participant
+                 and watcher.count_subscribers("/qt_robot/speech/say") >= 1)
+        if ready:
+            ready_since = ready_since or time.monotonic()
+            if time.monotonic() - ready_since >= 2.0:  # let the publishers match their subscribers
+                return None
+        if time.monotonic() > deadline:
+            return (f"the system was not ready after {timeout:g} s (heart rate samples on ROS 2: "
+                    f"{view.hr_samples}; subscribers of /QtController/input: "
+                    f"{watcher.count_subscribers('/QtController/input')})")
+        time.sleep(0.02)
+    return "interrupted during start-up"
+
+
+def summary(view: SessionView, wall: float, bag: str | None) -> str:
+    t0, t1 = view.started_at, view.ended_at
+    sim = (t1 - t0) if t0 is not None and t1 is not None else 0.0
+    in_zone = (f"{100.0 * view.exercise_in_zone / view.exercise_hr:.0f} % of {view.exercise_hr} exercise HR "
+               f"samples in the zone" if view.exercise_hr else "no exercise HR samples")
+    zone = f"{view.zone[0]:.1f}-{view.zone[1]:.1f} bpm" if view.zone else "never set"
+    factor = sim / wall if wall else 0.0
+    updates, behaviours = view.events.get("rule_update", 0), view.events.get("behaviour", 0)
+    return "\n".join([
+        f"[session] done: {sim / 60:.1f} min of session in {wall:.0f} s wall ({factor:.0f}x)",
+        f"[session] zone {zone}; {in_zone}; {view.adaptations} adaptations in {updates} rule updates; "
+        f"{behaviours} behaviours; {view.robot_actions} robot actions",
+        f"[session] heart-rate samples on ROS 2: {view.hr_samples}"
+        + (f"; recorded to {bag}" if bag else ""),
+    ])
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    problem = _check(args)
+    if problem:
+        print(f"hri_physio_session: error: {problem}", file=sys.stderr)
+        return 2
+    stop = threading.Event()
+
+    def on_signal(signum: int, _frame: object) -> None:
+        print(f"\n{signal.Signals(signum).name}: stopping the session", flush=True)
+        stop.set()
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+    view = SessionView()
+    hr_topic = ECG_HR_TOPIC if args.hr_source == "ecg" else HR_TOPIC
+    watcher = ClockAndWatcher(view, hr_topic)
+    group = ProcessGroup()
+    clock = SimClock(start=float(int(time.time())), speed=1.0)
+    print(f"HRI Physio session: simulated participant (age {args.age:g}) -> LSL -> ROS 2 -> coach "
+          f"({args.policy}) -> mock QT robot, at {args.speed:g}x real time", flush=True)
+    code = 0
+    wall = 0.0
+    try:
+        start_nodes(group, args, echo=not args.quiet_nodes)
+        problem = wait_for_system(watcher, group, clock, view, stop, args.startup_timeout)
+        if problem:
+            print(f"hri_physio_session: error: {problem}", file=sys.stderr, flush=True)
+            return 1
+        coach = next(p for p in group.procs if p.name == "coach")
+        watcher.send_start()
+        clock.set_speed(args.speed)
+        wall0 = time.monotonic()
+        print(f"[session] system ready: session started at {args.speed:g}x", flush=True)
+        next_report = time.monotonic() + args.progress_period
+        while not stop.is_set() and coach.returncode is None:
+            for t in clock.due_steps():
+                watcher.publish_clock(t)
+            dead = [p for p in group.procs if p.returncode is not None and p is not coach]
+            if dead:
+                print(f"hri_physio_session: error: {dead[0].name} exited early with code "
+                      f"{dead[0].returncode}", file=sys.stderr, flush=True)
+                code = 1
+                break
+            if time.monotonic() >= next_report:
+                next_report += args.progress_period
+                with watcher.lock:
+                    print(view.progress(clock.t), flush=True)
+            time.sleep(0.01)
+        wall = time.monotonic() - wall0
+        if coach.returncode not in (None, 0):
+            code = 1
+        # Let the robot finish its last speech and the last events reach us: a few more sim seconds.
+        end = clock.t + 10.0
+        while clock.t < end and not stop.is_set():
+            for t in clock.due_steps():
+                watcher.publish_clock(t)
+            time.sleep(0.01)
+    finally:
+        codes = group.stop()
+        bag: str | None = None
+        rec = next((p for p in group.procs if p.name == "recorder"), None)
+        if rec is not None:
+            bag = next((line.split("recording to ", 1)[1].split()[0] for line in rec.lines
+                        if "recording to " in line), None)
+        watcher.close()
+    print(summary(view, wall, bag), flush=True)
+    bad = {name: c for name, c in codes.items() if c != 0}
+    if bad:
+        print(f"hri_physio_session: error: node exit codes {bad}", file=sys.stderr, flush=True)
+        code = 1
+    if not stop.is_set() and view.ended_at is None:
+        print("hri_physio_session: error: the session did not reach its end", file=sys.stderr, flush=True)
+        code = 1
+    return code
+
+
+if __name__ == "__main__":
+    with contextlib.suppress(KeyboardInterrupt):
+        sys.exit(main())
