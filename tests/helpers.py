@@ -79,6 +79,10 @@ class NodeProcess:
         os.unlink(self.log_file.name)
 
 
+#: Deeper than the nodes' 1000: a test's bursts must not outrun a collector slowed by CI load.
+COLLECTOR_DEPTH = 10_000
+
+
 class RosFrameCollector:
     """An rclpy node on its own executor thread that collects decoded frames from topics."""
 
@@ -111,7 +115,7 @@ class RosFrameCollector:
             with self._lock:
                 got.append(msg_to_frame(msg))
 
-        self.node.create_subscription(Float64MultiArray, topic, on_msg, frame_qos())
+        self.node.create_subscription(Float64MultiArray, topic, on_msg, frame_qos(COLLECTOR_DEPTH))
         return got
 
     def publishers(self, topic: str) -> int:

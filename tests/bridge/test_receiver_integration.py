@@ -74,9 +74,13 @@ def test_lsl_to_ros_every_sample_once_in_order(lsl_name: str, collector: RosFram
         wait_until(outlet.have_consumers, 20, "discovery")
         time.sleep(0.3)
         stamps = push_counter(outlet, 0, 1300, pylsl.local_clock())
-        wait_until(lambda: sum(f.num_samples for f in got) >= 1300 - frame, 30,
-                   lambda: f"frames ({sum(f.num_samples for f in got)} samples in {len(got)} frames so far)\n"
-                           f"{rx.output}")
+
+        def progress() -> str:
+            seen = {int(v) for f in got for v in f.values[:, 0]}
+            missing = sorted(set(range(1300)) - seen)
+            return f"frames ({len(seen)} samples so far; missing {missing[:40]})\n{rx.output}"
+
+        wait_until(lambda: sum(f.num_samples for f in got) >= 1300 - frame, 30, progress)
         assert rx.stop(signal.SIGINT) == 0, rx.output
     ts, vs = concat_new_samples(got, frame, overlap)
     check_counter(ts, vs, stamps)
