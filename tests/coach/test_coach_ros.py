@@ -20,6 +20,7 @@ from typing import Any
 import pytest
 
 from helpers import NodeProcess, wait_until
+from hri_physio_bridge.ros_tools import clock_message
 
 pytestmark = pytest.mark.ros
 
@@ -116,7 +117,6 @@ class Probe:
         self._running = True
         self._thread = threading.Thread(target=self._spin, daemon=True)
         self._thread.start()
-        self._clock_cls = Clock
 
     def _add(self, into: list, parse: bool):
         def callback(msg: Any) -> None:
@@ -129,10 +129,7 @@ class Probe:
             self.executor.spin_once(timeout_sec=0.05)
 
     def publish_clock(self, t: float) -> None:
-        msg = self._clock_cls()
-        msg.clock.sec = int(t)
-        msg.clock.nanosec = min(round((t - int(t)) * 1e9), 999_999_999)
-        self.clock_pub.publish(msg)
+        self.clock_pub.publish(clock_message(t))
 
     def publish_hr(self, t: float, bpm: float) -> None:
         import numpy as np

@@ -16,6 +16,7 @@ from typing import Any
 import pytest
 
 from helpers import wait_until
+from hri_physio_bridge.ros_tools import clock_message
 
 SIM_START = 1000.0
 
@@ -27,7 +28,6 @@ class ClockDriver:
         from rclpy.node import Node
         from rosgraph_msgs.msg import Clock
 
-        self._clock_msg = Clock
         self.node = Node("test_clock", context=context)
         self.pub = self.node.create_publisher(Clock, "/clock", 10)
         self.step, self.period = step, period
@@ -42,10 +42,7 @@ class ClockDriver:
         while self._alive:
             if self.running.is_set():
                 self.t += self.step
-                msg = self._clock_msg()
-                msg.clock.sec = int(self.t)
-                msg.clock.nanosec = min(round((self.t - int(self.t)) * 1e9), 999_999_999)
-                self.pub.publish(msg)
+                self.pub.publish(clock_message(self.t))
             time.sleep(self.period)
 
     def close(self) -> None:

@@ -11,34 +11,29 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import signal
 import sys
-import threading
 import time
-import uuid
 
 import numpy as np
 
 from hri_physio_bridge.launcher import ProcessGroup
+from hri_physio_bridge.nodes.common import install_stop_handlers
+from hri_physio_bridge.ros_tools import BackgroundNode
 
 ECG_TOPIC = "/physio/polar_h10/ecg"
 HR_TOPIC = "/physio/polar_h10/hr"
 
 
-class TopicWatcher:
+class TopicWatcher(BackgroundNode):
     """Counts ECG samples and keeps the latest HR, from the ROS 2 topics."""
 
     def __init__(self) -> None:
-        import rclpy
-        from rclpy.executors import SingleThreadedExecutor
         from std_msgs.msg import Float64MultiArray
 
         from hri_physio_bridge.frames import msg_to_frame
         from hri_physio_bridge.streamers.ros import frame_qos
 
-        self._rclpy = rclpy
-        rclpy.init(args=None, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-        self.node = rclpy.create_node(f"demo_watcher_{uuid.uuid4().hex[:4]}")
+        super().__init__("demo_watcher")
         self.ecg_samples = 0
         self.ecg_counter_ok = True
         self.last_ecg_t = float("nan")
@@ -63,22 +58,7 @@ class TopicWatcher:
 
         self.node.create_subscription(Float64MultiArray, ECG_TOPIC, on_ecg, frame_qos())
         self.node.create_subscription(Float64MultiArray, HR_TOPIC, on_hr, frame_qos())
-        self.executor = SingleThreadedExecutor()
-        self.executor.add_node(self.node)
-        self._running = True
-        self._thread = threading.Thread(target=self._spin, daemon=True)
-        self._thread.start()
-
-    def _spin(self) -> None:
-        while self._running:
-            self.executor.spin_once(timeout_sec=0.05)
-
-    def close(self) -> None:
-        self._running = False
-        self._thread.join(2.0)
-        self.executor.shutdown(timeout_sec=1.0)
-        self.node.destroy_node()
-        self._rclpy.try_shutdown()
+        self.start()
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -103,14 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     dev = args.device_id
     echo = not args.quiet_nodes
     group = ProcessGroup()
-    stop = threading.Event()
-
-    def on_signal(signum: int, _frame: object) -> None:
-        print(f"\n{signal.Signals(signum).name}: stopping the demo", flush=True)
-        stop.set()
-
-    signal.signal(signal.SIGINT, on_signal)
-    signal.signal(signal.SIGTERM, on_signal)
+    stop = install_stop_handlers(lambda name: print(f"\n{name}: stopping the demo", flush=True))
     watcher = TopicWatcher()
     print(f"HRI Physio demo: simulated Polar H10 '{dev}' for {args.seconds:g} s "
           f"-> LSL -> physio_receiver -> ROS 2 {ECG_TOPIC}, {HR_TOPIC}", flush=True)

@@ -23,16 +23,16 @@ import argparse
 import contextlib
 import json
 import math
-import signal
 import sys
 import threading
 import time
-import uuid
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from hri_physio_bridge.launcher import ProcessGroup
+from hri_physio_bridge.nodes.common import install_stop_handlers
+from hri_physio_bridge.ros_tools import BackgroundNode, clock_message
 
 HR_TOPIC = "/physio/polar_h10/hr"
 ECG_TOPIC = "/physio/polar_h10/ecg"
@@ -91,12 +91,10 @@ class SessionView:
                 f"zone {zone}  {pace}  adaptations {self.adaptations}  robot actions {self.robot_actions}")
 
 
-class ClockAndWatcher:
+class ClockAndWatcher(BackgroundNode):
     """Publishes /clock and watches the session's topics, on its own executor thread."""
 
     def __init__(self, view: SessionView, hr_topic: str) -> None:
-        import rclpy
-        from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
         from rosgraph_msgs.msg import Clock
         from std_msgs.msg import Float64MultiArray, String
@@ -104,13 +102,10 @@ class ClockAndWatcher:
         from hri_physio_bridge.frames import msg_to_frame
         from hri_physio_bridge.streamers.ros import frame_qos
 
-        self._rclpy = rclpy
-        self._clock_cls = Clock
+        super().__init__("session_launcher")
         self._string_cls = String
         self.view = view
         self.lock = threading.Lock()
-        rclpy.init(args=None, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-        self.node = rclpy.create_node(f"session_launcher_{uuid.uuid4().hex[:4]}")
         self.clock_pub = self.node.create_publisher(Clock, "/clock", 10)
         self.control_pub = self.node.create_publisher(String, "/coach/control", 10)
 
@@ -146,34 +141,16 @@ class ClockAndWatcher:
         self.node.create_subscription(String, "/coach/events", on_json(view.on_event), 1000)
         self.node.create_subscription(String, "/participant/state", on_json(set_model), 100)
         self.node.create_subscription(String, "/qt_robot/mock/events", on_json(count_action), 1000)
-        self.executor = SingleThreadedExecutor()
-        self.executor.add_node(self.node)
-        self._running = True
-        self._thread = threading.Thread(target=self._spin, daemon=True)
-        self._thread.start()
-
-    def _spin(self) -> None:
-        while self._running:
-            self.executor.spin_once(timeout_sec=0.05)
+        self.start()
 
     def publish_clock(self, t: float) -> None:
-        msg = self._clock_cls()
-        msg.clock.sec = int(t)
-        msg.clock.nanosec = min(round((t - int(t)) * 1e9), 999_999_999)
-        self.clock_pub.publish(msg)
+        self.clock_pub.publish(clock_message(t))
 
     def send_start(self) -> None:
         self.control_pub.publish(self._string_cls(data="start"))
 
     def count_subscribers(self, topic: str) -> int:
         return self.node.count_subscribers(topic)
-
-    def close(self) -> None:
-        self._running = False
-        self._thread.join(2.0)
-        self.executor.shutdown(timeout_sec=1.0)
-        self.node.destroy_node()
-        self._rclpy.try_shutdown()
 
 
 class SimClock:
@@ -337,14 +314,7 @@ def main(argv: list[str] | None = None) -> int:
     if problem:
         print(f"hri_physio_session: error: {problem}", file=sys.stderr)
         return 2
-    stop = threading.Event()
-
-    def on_signal(signum: int, _frame: object) -> None:
-        print(f"\n{signal.Signals(signum).name}: stopping the session", flush=True)
-        stop.set()
-
-    signal.signal(signal.SIGINT, on_signal)
-    signal.signal(signal.SIGTERM, on_signal)
+    stop = install_stop_handlers(lambda name: print(f"\n{name}: stopping the session", flush=True))
     view = SessionView()
     hr_topic = ECG_HR_TOPIC if args.hr_source == "ecg" else HR_TOPIC
     watcher = ClockAndWatcher(view, hr_topic)
