@@ -1,4 +1,4 @@
-"""Test-session isolation: own ROS domain, own LSL stream names, localhost only.
+"""Test-session isolation: own ROS domain (claimed), own LSL stream names, localhost only.
 
 The environment is fixed at import time, before any test imports rclpy, so
 every node and every subprocess of this session sees the same settings.
@@ -6,9 +6,11 @@ every node and every subprocess of this session sees the same settings.
 
 from __future__ import annotations
 
+import fcntl
 import os
 import random
 import sys
+import tempfile
 import uuid
 from pathlib import Path
 
@@ -18,7 +20,30 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # tests/helpers.py
 VENV = Path(sys.prefix)
 
-os.environ.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(1, 100)))
+
+
+def _claim_domain_id() -> int:
+    """A ROS domain no other test session on this machine holds (1-101; 0 is a live system's default).
+
+    Always chosen here, never inherited: tests must not talk to a system the user is running.
+    The claim is an flock on a file in the temp dir, released when this process exits.
+    """
+    ids = list(range(1, 102))
+    random.SystemRandom().shuffle(ids)
+    for domain in ids:
+        handle = open(Path(tempfile.gettempdir()) / f"hri_physio_test_domain_{domain}.lock", "w")  # noqa: SIM115
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            handle.close()
+            continue
+        _DOMAIN_LOCKS.append(handle)  # keep it open (and locked) for the whole session
+        return domain
+    raise RuntimeError("every ROS domain 1-101 is held by another test session on this machine")
+
+
+_DOMAIN_LOCKS: list = []
+os.environ["ROS_DOMAIN_ID"] = str(_claim_domain_id())
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
 if str(VENV) not in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):

@@ -378,3 +378,40 @@ def test_cli_conf_file_sets_options_and_flags_win(tmp_path: Path, lsl_name: str)
         assert sim.wait(30) == 0, sim.output
     assert f"streaming {lsl_name}/NeuroKitSim/CONF1/RAMP (1 s, 40 Hz" in sim.output
     assert "done: sent ramp: 40" in sim.output
+
+
+# -- each seed flag changes the signal as NeuroKit2 documents it ------------------------------------
+def _seg(signal_name: str, seconds: int = 60, rate: float = 250.0, **flags: float) -> np.ndarray:
+    return neurokit_segment(signal_name, SimulatorConfig(rate=rate, **flags), int(seconds * rate), seed=7)
+
+
+def test_noise_flag_scales_the_added_noise() -> None:
+    clean = _seg("ecg", noise=0.0)
+    added = [np.std(_seg("ecg", noise=level) - clean) for level in (0.01, 0.1, 0.5)]
+    assert added[0] > 0
+    np.testing.assert_allclose(np.array(added) / added[0], [1, 10, 50], rtol=0.05)  # proportional
+
+
+def test_resp_flag_sets_the_breathing_rate() -> None:
+    for rate in (10.0, 30.0):
+        x = _seg("rsp", rate=50.0, resp=rate, noise=0.0)
+        _, info = nk.rsp_peaks(nk.rsp_clean(x, sampling_rate=50), sampling_rate=50)
+        assert len(info["RSP_Peaks"]) == pytest.approx(rate, abs=2)  # breaths in 60 s
+
+
+def test_scr_and_drift_flags_shape_the_skin_conductance() -> None:
+    none, many = _seg("eda", rate=50.0, scr=0, noise=0.0, drift=0.0), _seg("eda", rate=50.0, scr=6, noise=0.0,
+                                                                            drift=0.0)
+    assert np.ptp(none) < 0.05 * np.ptp(many)  # no responses: a flat tonic level
+    rising = _seg("eda", rate=50.0, scr=0, noise=0.0, drift=0.5)
+    assert rising[-50:].mean() - rising[:50].mean() > 10 * abs(none[-50:].mean() - none[:50].mean()) + 0.1
+
+
+def test_bnum_and_bdur_flags_set_the_emg_bursts() -> None:
+    def active_seconds(x: np.ndarray, rate: float = 250.0) -> float:
+        envelope = np.convolve(np.abs(x), np.ones(50) / 50, mode="same")
+        return float(np.sum(envelope > 0.25 * envelope.max()) / rate)
+
+    assert np.std(_seg("emg", bnum=0, noise=0.01)) < 0.5 * np.std(_seg("emg", bnum=3, noise=0.01))
+    short, long = active_seconds(_seg("emg", bnum=3, bdur=0.5)), active_seconds(_seg("emg", bnum=3, bdur=2.0))
+    assert long > 2.5 * short

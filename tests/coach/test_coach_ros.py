@@ -191,6 +191,16 @@ def test_interactive_waits_for_start_on_stdin_and_stops_on_sigterm(probe: Probe)
         assert "Traceback" not in coach.output
 
 
+def test_without_interactive_the_session_starts_at_once(probe: Probe) -> None:
+    with NodeProcess("qt_physio_coach", "--ros-args", "-p", "hr_topic:=/test/coach/hr") as coach:
+        # /coach/state is latched: it reaches a late subscriber, unlike the session_start event.
+        wait_until(lambda: any(st["state"] == "running" for st in probe.states), 30,
+                   lambda: f"a running state on /coach/state\n{coach.output}")
+        assert "waiting for 'start'" not in coach.output
+        assert coach.stop(signal.SIGINT) == 0, coach.output
+        assert "Traceback" not in coach.output
+
+
 def test_start_on_the_control_topic_and_sigint(probe: Probe) -> None:
     from std_msgs.msg import String
 

@@ -100,6 +100,18 @@ def test_closed_loop_session_runs_to_its_end_and_records_everything(short_sessio
     assert len(msgs["/physio/polar_h10/ecg/hr"]) >= 10
 
 
+def test_coach_can_adapt_on_the_processors_heart_rate(short_session: list[str]) -> None:
+    with NodeProcess("hri_physio_session", *short_session, "--hr-source", "ecg", "--no-record") as session:
+        code = session.wait(240)
+    assert code == 0, session.output
+    updates = int(re.search(r"adaptations in (\d+) rule updates", session.output).group(1))
+    starved = re.search(r"(\d+) rule update\(s\) gated: too few valid HR samples", session.output)
+    assert updates >= 5 and (starved is None or int(starved.group(1)) <= 2), session.output
+    # The summary counts HR samples from the coach's input, here the processor's 5 s windows.
+    samples = int(re.search(r"on the coach's input during the session: (\d+)", session.output).group(1))
+    assert 270 / 5 - 5 <= samples <= 270 / 5 + 2, session.output
+
+
 def test_sigint_stops_every_node_and_closes_the_bag(short_session: list[str]) -> None:
     with NodeProcess("hri_physio_session", *short_session, "--speed", "1") as session:
         session.wait_for_output("[session] system ready", timeout=90)

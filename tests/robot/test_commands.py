@@ -103,6 +103,10 @@ def test_valid_commands_parse(line: str, expected: c.Command) -> None:
         ("get velocity", "takes 1 argument(s)"),
         ("get emotion now", "takes 0 argument(s), got 1"),
         ("exit now", "takes 0 argument(s), got 1"),
+        ("help me", "takes 0 argument(s), got 1"),
+        ("set velocity head abc", "velocity must be a number, got 'abc'"),
+        ("set lights a b c", "red must be a whole number, got 'a'"),
+        ("set vibration x 1", "intensity must be a whole number, got 'x'"),
     ],
 )
 def test_malformed_commands_raise_clear_errors(line: str, fragment: str) -> None:

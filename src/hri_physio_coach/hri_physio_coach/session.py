@@ -12,7 +12,7 @@ Starts, as separate processes (the console scripts a lab would run):
 
 This process drives ``/clock`` (every node but the receivers, processor and recorder runs on
 sim time), so the 23-minute routine runs ``--speed`` times faster than real time (1 = real
-time). It waits until the robot side is up and heart rate flows into ROS 2, then sends
+time). It waits until the robot side is up and heart rate reaches the coach's input, then sends
 ``start`` to the coach, prints live progress, and when the coach ends the session stops every
 process cleanly (the recorder last) and prints a summary.
 """
@@ -23,6 +23,7 @@ import argparse
 import contextlib
 import json
 import math
+import re
 import sys
 import threading
 import time
@@ -41,6 +42,10 @@ ECG_HR_TOPIC = "/physio/polar_h10/ecg/hr"
 #: (coach tick, participant update and the mock's joint states below), or timers skip periods.
 CLOCK_STEP = 0.1
 EXERCISE_PHASES = ("warm_up", "conditioning", "cool_down")
+#: Valid HR samples a rule update needs when the coach listens to the processor's HR.
+ECG_HR_MIN_SAMPLES = 3
+#: Seconds without HR before the coach pauses adaptation, on the processor's HR (4 hops).
+ECG_HR_TIMEOUT = 20.0
 
 
 @dataclass
@@ -49,11 +54,14 @@ class SessionView:
 
     state: dict = field(default_factory=dict)
     hr: float = math.nan
-    hr_samples: int = 0
+    hr_seen: int = 0  # on the coach's HR topic, since launch
+    hr_samples: int = 0  # on the coach's HR topic, between session start and end
+    strap_samples: int = 0  # on the strap's HR topic: proves the LSL -> ROS 2 path at start-up
     model_hr: float = math.nan
     zone: tuple[float, float] | None = None
     events: dict[str, int] = field(default_factory=dict)
     adaptations: int = 0
+    gated: dict[str, int] = field(default_factory=dict)  # rule updates that could not run, by reason
     exercise_hr: int = 0
     exercise_in_zone: int = 0
     robot_actions: int = 0
@@ -69,12 +77,18 @@ class SessionView:
             self.ended_at = float(event["t"])
         elif kind == "zone":
             self.zone = (float(event["low"]), float(event["high"]))
-        elif kind == "rule_update" and event.get("decision", {}).get("changed"):
-            self.adaptations += 1
+        elif kind == "rule_update":
+            decision = event.get("decision", {})
+            self.adaptations += int(bool(decision.get("changed")))
+            if decision.get("action") == "gated":
+                reason = re.sub(r"\d+(\.\d+)?", "N", str(decision.get("reason")))  # one line per kind
+                self.gated[reason] = self.gated.get(reason, 0) + 1
 
     def on_hr(self, bpm: float) -> None:
         self.hr = bpm
-        self.hr_samples += 1
+        self.hr_seen += 1
+        if self.started_at is not None and self.ended_at is None:
+            self.hr_samples += 1
         if self.zone is not None and self.state.get("phase_kind") in EXERCISE_PHASES:
             self.exercise_hr += 1
             self.exercise_in_zone += int(self.zone[0] <= bpm <= self.zone[1])
@@ -114,6 +128,8 @@ class ClockAndWatcher(BackgroundNode):
             with self.lock:
                 for bpm in frame.values[:, -1]:
                     view.on_hr(float(bpm))
+                if hr_topic == HR_TOPIC:
+                    view.strap_samples += frame.num_samples
 
         def on_json(apply: Callable[[dict], None]) -> Callable[[String], None]:
             def callback(msg: String) -> None:
@@ -136,7 +152,13 @@ class ClockAndWatcher(BackgroundNode):
 
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        def on_strap(msg: Float64MultiArray) -> None:
+            with self.lock:
+                view.strap_samples += msg_to_frame(msg).num_samples
+
         self.node.create_subscription(Float64MultiArray, hr_topic, on_hr, frame_qos())
+        if hr_topic != HR_TOPIC:
+            self.node.create_subscription(Float64MultiArray, HR_TOPIC, on_strap, frame_qos())
         self.node.create_subscription(String, "/coach/state", on_json(set_state), latched)
         self.node.create_subscription(String, "/coach/events", on_json(view.on_event), 1000)
         self.node.create_subscription(String, "/participant/state", on_json(set_model), 100)
@@ -161,12 +183,6 @@ class SimClock:
         self.speed = speed
         self._base = start
         self._wall = time.monotonic()
-
-    def set_speed(self, speed: float) -> None:
-        """From now on, advance at ``speed`` (no jump: continues from the current value)."""
-        self._wall = time.monotonic()
-        self._base = self.t
-        self.speed = speed
 
     def due_steps(self) -> list[float]:
         """The clock values to publish now, to keep up with the wall clock."""
@@ -257,6 +273,9 @@ def start_nodes(group: ProcessGroup, args: argparse.Namespace, echo: bool) -> No
     hr_topic = ECG_HR_TOPIC if args.hr_source == "ecg" else HR_TOPIC
     coach += ["--hr-topic", hr_topic, "--ros-args", *sim, "-p", f"part_age:={args.age:.1f}",
               "-p", f"tick_period:={CLOCK_STEP:.3f}"]
+    if args.hr_source == "ecg":
+        # One processor HR per 5 s hop: 6 per 30 s rule update, below the strap's default of 10.
+        coach += ["-p", f"min_valid_samples:={ECG_HR_MIN_SAMPLES}", "-p", f"hr_timeout:={ECG_HR_TIMEOUT:.1f}"]
     if args.routine is not None:
         coach += ["-p", f"routine_file:={args.routine.resolve()}"]
     group.start("coach", "qt_physio_coach", coach, echo=echo)
@@ -264,7 +283,7 @@ def start_nodes(group: ProcessGroup, args: argparse.Namespace, echo: bool) -> No
 
 def wait_for_system(watcher: ClockAndWatcher, group: ProcessGroup, clock: SimClock, view: SessionView,
                     stop: threading.Event, timeout: float) -> str | None:
-    """Run the clock at real time until the robot side listens and heart rate reaches ROS 2."""
+    """Drive the clock until the robot side listens and heart rate reaches the coach's input."""
     deadline = time.monotonic() + timeout
     ready_since: float | None = None
     while not stop.is_set():
@@ -275,7 +294,9 @@ def wait_for_system(watcher: ClockAndWatcher, group: ProcessGroup, clock: SimClo
             tail = "\n".join(dead[0].lines[-5:])
             return f"{dead[0].name} exited during start-up with code {dead[0].returncode}:\n{tail}"
         with watcher.lock:
-            hr_flowing = view.hr_samples >= 2
+            # The strap's HR proves LSL -> ROS 2; the coach's own input must flow too (the
+            # processor's first HR needs a full window of ECG).
+            hr_flowing = view.strap_samples >= 2 and view.hr_seen >= 1
         ready = (hr_flowing and watcher.count_subscribers("/coach/control") >= 1
                  and watcher.count_subscribers("/QtController/input") >= 2  # controller, participant
                  and watcher.count_subscribers("/qt_robot/speech/say") >= 1)
@@ -284,8 +305,8 @@ def wait_for_system(watcher: ClockAndWatcher, group: ProcessGroup, clock: SimClo
             if time.monotonic() - ready_since >= 2.0:  # let the publishers match their subscribers
                 return None
         if time.monotonic() > deadline:
-            return (f"the system was not ready after {timeout:g} s (heart rate samples on ROS 2: "
-                    f"{view.hr_samples}; subscribers of /QtController/input: "
+            return (f"the system was not ready after {timeout:g} s (strap heart-rate samples on ROS 2: "
+                    f"{view.strap_samples}; subscribers of /QtController/input: "
                     f"{watcher.count_subscribers('/QtController/input')})")
         time.sleep(0.02)
     return "interrupted during start-up"
@@ -303,7 +324,8 @@ def summary(view: SessionView, wall: float, bag: str | None) -> str:
         f"[session] done: {sim / 60:.1f} min of session in {wall:.0f} s wall ({factor:.0f}x)",
         f"[session] zone {zone}; {in_zone}; {view.adaptations} adaptations in {updates} rule updates; "
         f"{behaviours} behaviours; {view.robot_actions} robot actions",
-        f"[session] heart-rate samples on ROS 2: {view.hr_samples}"
+        *(f"[session] {n} rule update(s) gated: {reason}" for reason, n in sorted(view.gated.items())),
+        f"[session] heart-rate samples on the coach's input during the session: {view.hr_samples}"
         + (f"; recorded to {bag}" if bag else ""),
     ])
 
@@ -319,7 +341,9 @@ def main(argv: list[str] | None = None) -> int:
     hr_topic = ECG_HR_TOPIC if args.hr_source == "ecg" else HR_TOPIC
     watcher = ClockAndWatcher(view, hr_topic)
     group = ProcessGroup()
-    clock = SimClock(start=float(int(time.time())), speed=1.0)
+    # The clock runs at --speed from the beginning: before 'start' the participant sits and the
+    # processor fills its first window (60 s of ECG) without keeping the launcher waiting.
+    clock = SimClock(start=float(int(time.time())), speed=args.speed)
     print(f"HRI Physio session: simulated participant (age {args.age:g}) -> LSL -> ROS 2 -> coach "
           f"({args.policy}) -> mock QT robot, at {args.speed:g}x real time", flush=True)
     code = 0
@@ -332,7 +356,6 @@ def main(argv: list[str] | None = None) -> int:
             return 1
         coach = next(p for p in group.procs if p.name == "coach")
         watcher.send_start()
-        clock.set_speed(args.speed)
         wall0 = time.monotonic()
         print(f"[session] system ready: session started at {args.speed:g}x", flush=True)
         next_report = time.monotonic() + args.progress_period

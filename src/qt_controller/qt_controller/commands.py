@@ -224,6 +224,7 @@ def parse_command(line: str) -> Command:
         raise ParseError("empty command; try 'help'")
     verb = words[0].lower()
     if verb in ("help", "?"):
+        _arity(verb, words[1:], 0)
         return Help()
     if verb in ("exit", "quit"):
         _arity(verb, words[1:], 0)
