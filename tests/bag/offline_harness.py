@@ -3,24 +3,42 @@
 Generic over nodes and topics:
 
 * :meth:`OfflineHarness.record` starts the recorder on some topics, then the nodes of a live
-  session (console scripts), waits until every topic is being recorded and the nodes that
-  run to an end have ended, stops the others (SIGINT, exit 0 asserted), closes the bag;
+  session (console scripts) one by one, waits until every topic is being recorded and the
+  nodes that run to an end have ended, stops the others (SIGINT, exit 0 asserted, upstream
+  first), closes the bag. Record both the *inputs* and the *outputs* of the nodes under
+  test: the bag is then the reference their fresh instances must reproduce;
 * :meth:`OfflineHarness.replay` starts fresh nodes and a recorder on their outputs, plays the
   chosen input topics of a bag into them as fast as possible (order kept, after they have
   subscribed), stops them, and returns the bag of their outputs;
 * :meth:`OfflineHarness.decoded` / :meth:`assert_same` compare topics of two bags message by
   message (decoded values: DDS alignment padding may differ byte-wise between runs).
 
-Why replays are compared with replays, and the live leg against the bag: ROS 2 topics are
-volatile, and the recorder can subscribe to a topic only once it has a publisher, so a
-downstream node that is already listening may see a few frames more than the recorder at
-the start of a *live* session; fed from the same bag, node outputs must be identical.
+A node's live output can be reproduced only if the bag holds every input message that node
+saw, and the node saw every one the bag holds. ROS 2 topics are volatile, and a publisher
+that waits for "a" subscriber (``physio_receiver --wait-for-consumers``) starts as soon as
+the first one is matched: when two processes listen to it (the recorder and the node under
+test), DDS discovery may match the second one later, and it misses the first frames (seen on
+a 2-core machine in 3 of 8 runs: the recorder or the node under test lost the first 3 to 14
+frames of 30). So:
+
+* a :class:`Relay` (in this process) forwards ``source`` to ``topic`` unchanged (raw bytes)
+  and holds every message until its publisher on ``topic`` has matched ``subscribers``
+  subscriptions (the recorder and the nodes under test). A reliable publisher delivers every
+  message published after a subscription was matched, so each of them receives the whole
+  stream, whatever the discovery timing. The upstream node publishes on ``source``, which
+  only the relay reads: its own wait for a consumer is then enough;
+* ``NodeSpec.publishes``: after starting that node, the harness waits until the recorder
+  records those topics before starting the next node (which may be the data source);
+* stopping waits ``stop_gap`` seconds between nodes, so a downstream node has taken the
+  frames its upstream node published at shutdown before it is stopped itself.
 """
 
 from __future__ import annotations
 
 import signal
+import threading
 import time
+import uuid
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,12 +54,90 @@ class NodeSpec:
     args: tuple[str, ...] = ()
     runs_to_end: bool = False  # wait for it to exit by itself (a simulator with --seconds)
     ready: str | None = None  # text its output shows once it is ready for the next node
+    publishes: tuple[str, ...] = ()  # recorded topics it publishes: recorded before the next node starts
+
+
+@dataclass(frozen=True)
+class Relay:
+    source: str  # the upstream node publishes here
+    topic: str  # recorded, and read by the nodes under test
+    msg_type: Any
+    subscribers: int  # subscriptions on ``topic`` to wait for: the recorder + the nodes under test
+    depth: int = 1000
+
+
+class _Relays:
+    """Raw forwarding of each relay's ``source`` to its ``topic`` on an executor thread; messages
+    are held until the relay's publisher has matched ``subscribers`` subscriptions."""
+
+    def __init__(self, context: Any, relays: list[Relay]) -> None:
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.node import Node
+        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+        self.node = Node(f"harness_relay_{uuid.uuid4().hex[:6]}", context=context)
+        self.relays = relays
+        self.held: dict[str, list[bytes]] = {r.topic: [] for r in relays}
+        self.forwarded: dict[str, int] = {r.topic: 0 for r in relays}
+        self.open: dict[str, bool] = {r.topic: False for r in relays}
+        self._pubs: dict[str, Any] = {}
+        for r in relays:
+            qos = QoSProfile(
+                history=HistoryPolicy.KEEP_LAST, depth=r.depth, reliability=ReliabilityPolicy.RELIABLE
+            )
+            self._pubs[r.topic] = self.node.create_publisher(r.msg_type, r.topic, qos)
+            self.node.create_subscription(
+                r.msg_type, r.source, lambda data, r=r: self._on_message(r, data), qos, raw=True
+            )
+        self.node.create_timer(0.01, self._release)
+        self.executor = SingleThreadedExecutor(context=context)
+        self.executor.add_node(self.node)
+        self._running = True
+        self._thread = threading.Thread(target=self._spin, name="harness-relay", daemon=True)
+        self._thread.start()
+
+    def _spin(self) -> None:
+        while self._running:
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def _on_message(self, relay: Relay, data: bytes) -> None:
+        self.held[relay.topic].append(data)
+        self._release()
+
+    def _release(self) -> None:
+        for r in self.relays:
+            pub = self._pubs[r.topic]
+            if not self.open[r.topic] and pub.get_subscription_count() >= r.subscribers:
+                self.open[r.topic] = True  # from now on everything passes straight through
+            if self.open[r.topic] and self.held[r.topic]:
+                for data in self.held[r.topic]:
+                    pub.publish(data)
+                self.forwarded[r.topic] += len(self.held[r.topic])
+                self.held[r.topic].clear()
+
+    def problems(self) -> list[str]:
+        return [
+            f"relay {r.source} -> {r.topic}: {self._pubs[r.topic].get_subscription_count()} of "
+            f"{r.subscribers} subscriptions matched, {len(self.held[r.topic])} message(s) held back"
+            for r in self.relays
+            if self.held[r.topic]
+        ]
+
+    def close(self) -> None:
+        self._running = False
+        self._thread.join(2.0)
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
 
 
 class OfflineHarness:
-    def __init__(self, workdir: Path, timeout: float = 60.0) -> None:
+    def __init__(
+        self, workdir: Path, timeout: float = 60.0, ros_context: Any = None, stop_gap: float = 0.5
+    ) -> None:
         self.workdir = workdir
         self.timeout = timeout
+        self.ros_context = ros_context
+        self.stop_gap = stop_gap
         self.logs: dict[str, str] = {}
 
     def _recorder(self, name: str, topics: Iterable[str]) -> tuple[NodeProcess, Path]:
@@ -50,10 +146,17 @@ class OfflineHarness:
         rec.wait_for_output("recording to", self.timeout)
         return rec, bag
 
-    def _start(self, spec: NodeSpec) -> NodeProcess:
+    def _start(self, spec: NodeSpec, rec: NodeProcess, recorded: list[str]) -> NodeProcess:
         proc = NodeProcess(spec.script, *spec.args)
-        if spec.ready:
-            proc.wait_for_output(spec.ready, self.timeout)
+        try:
+            if spec.ready:
+                proc.wait_for_output(spec.ready, self.timeout)
+            for topic in spec.publishes:
+                if topic in recorded:
+                    rec.wait_for_output(f"recording {topic} ", self.timeout)
+        except BaseException:
+            proc.__exit__(None, None, None)
+            raise
         return proc
 
     def _finish(
@@ -64,33 +167,57 @@ class OfflineHarness:
                 if spec.runs_to_end:
                     assert proc.wait(self.timeout) == 0, proc.output
             time.sleep(settle)
+            # Upstream first (nodes are started downstream first): each node takes what the
+            # previous one published at shutdown before it is stopped in turn.
             for spec, proc in reversed(procs):
                 if not spec.runs_to_end:
                     assert proc.stop(signal.SIGINT) == 0, proc.output
-            time.sleep(0.3)  # the last frames published at shutdown reach the recorder
+                    time.sleep(self.stop_gap)
             assert rec.stop(signal.SIGINT) == 0, rec.output
         finally:
-            for spec, proc in procs:
+            for i, (spec, proc) in enumerate(procs):
                 proc.__exit__(None, None, None)
-                self.logs[f"{name}:{spec.script}"] = proc.output
+                self.logs[f"{name}:{i}:{spec.script}"] = proc.output
             rec.__exit__(None, None, None)
             self.logs[f"{name}:recorder"] = rec.output
 
-    def record(self, name: str, topics: list[str], nodes: list[NodeSpec], settle: float = 1.0) -> Path:
-        """A live session of ``nodes`` with ``topics`` recorded; returns the bag."""
+    def record(
+        self,
+        name: str,
+        topics: list[str],
+        nodes: list[NodeSpec],
+        settle: float = 1.0,
+        relays: list[Relay] | None = None,
+    ) -> Path:
+        """A live session of ``nodes`` (started in this order, after the ``relays``) with
+        ``topics`` recorded; returns the bag."""
         rec, bag = self._recorder(name, topics)
         procs: list[tuple[NodeSpec, NodeProcess]] = []
+        relay = None
         try:
+            if relays:
+                if self.ros_context is None:
+                    raise ValueError("relays need OfflineHarness(ros_context=...)")
+                relay = _Relays(self.ros_context, relays)
             for spec in nodes:
-                procs.append((spec, self._start(spec)))
+                procs.append((spec, self._start(spec, rec, topics)))
             for topic in topics:
                 rec.wait_for_output(f"recording {topic} ", self.timeout)
         except BaseException:
             for _spec, proc in procs:
                 proc.__exit__(None, None, None)
             rec.__exit__(None, None, None)
+            if relay is not None:
+                relay.close()
             raise
-        self._finish(name, rec, procs, settle)
+        try:
+            self._finish(name, rec, procs, settle)
+            if relay is not None:
+                self.logs[f"{name}:relays"] = f"forwarded {relay.forwarded}"
+                assert not relay.problems(), relay.problems()
+        finally:
+            if relay is not None:
+                relay.close()
         return bag
 
     def replay(
@@ -107,7 +234,7 @@ class OfflineHarness:
         procs: list[tuple[NodeSpec, NodeProcess]] = []
         try:
             for spec in nodes:
-                procs.append((spec, self._start(spec)))
+                procs.append((spec, self._start(spec, rec, outputs)))
             for topic in outputs:
                 rec.wait_for_output(f"recording {topic} ", self.timeout)
             with NodeProcess(

@@ -1,10 +1,15 @@
-"""The offline harness on the bridge: simulated ECG -> physio_receiver -> bag -> replay.
+"""The offline harness on the bridge: a live session, recorded, replayed into the same node.
 
-Live: physio_simulator (LSL, 130 Hz ECG) -> physio_receiver (LSL -> /ecg) while the recorder
-records /ecg. Then the bag is (1) replayed to a subscriber: every frame and every sample
-timestamp must come back bit for bit; (2) replayed twice into a fresh physio_receiver
-(ROS -> ROS sliding windows): both runs' outputs must be identical, and the windows must
-hold exactly the recorded samples.
+Live: physio_simulator (LSL, 130 Hz ECG) -> physio_receiver ``rx_live`` (LSL -> ROS) -> the
+harness's relay (-> /ecg, held until the recorder and rx_window are both matched) ->
+physio_receiver ``rx_window`` (ROS -> ROS sliding windows, /ecg -> /ecg_win), while the
+recorder records both /ecg (the window node's input) and /ecg_win (its output). Then:
+
+1. the bag is replayed to a subscriber: every frame and every sample timestamp of /ecg
+   comes back bit for bit;
+2. the recorded /ecg is replayed, twice, into fresh ``rx_window`` nodes: each run's /ecg_win
+   must equal the *live* /ecg_win frame by frame (channels, sample timestamps, values), and
+   the windows hold exactly the simulated samples.
 """
 
 from __future__ import annotations
@@ -14,9 +19,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from offline_harness import NodeSpec, OfflineHarness
+from offline_harness import NodeSpec, OfflineHarness, Relay
 
-from helpers import RosFrameCollector, concat_new_samples, wait_until
+from helpers import NodeProcess, RosFrameCollector, concat_new_samples, wait_until
 from hri_physio_bridge.frames import Frame, msg_to_frame
 
 pytestmark = [pytest.mark.ros, pytest.mark.lsl]
@@ -39,19 +44,43 @@ def _same_frame(a: Frame, b: Frame) -> bool:
     )
 
 
-def test_receiver_output_round_trips_and_replays_deterministically(
-    tmp_path: Path, lsl_name: str, ros_context
-) -> None:
+def test_live_window_output_is_reproduced_by_replay(tmp_path: Path, lsl_name: str, ros_context) -> None:
+    from std_msgs.msg import Float64MultiArray
+
     uid = uuid.uuid4().hex[:8]
-    ecg, win = f"/harness_{uid}/ecg", f"/harness_{uid}/ecg_win"
-    h = OfflineHarness(tmp_path)
+    source, ecg, win = f"/harness_{uid}/ecg_live", f"/harness_{uid}/ecg", f"/harness_{uid}/ecg_win"
+    h = OfflineHarness(tmp_path, ros_context=ros_context)
+
+    def rx_window() -> NodeSpec:
+        return NodeSpec(
+            "physio_receiver",
+            (
+                "--input",
+                f"ros:{ecg}",
+                "--output",
+                f"ros:{win}",
+                "--num-channels",
+                "1",
+                "--output-frame",
+                "20",
+                "--sample-overlap",
+                "5",
+                "--sampling-rate",
+                str(RATE),
+                "--wait-for-consumers",
+                "60",
+            ),
+            ready="connected",
+            publishes=(win,),
+        )
+
     rx_live = NodeSpec(
         "physio_receiver",
         (
             "--input",
             f"lsl:{lsl_name}/PolarH10/SIM0001/ECG",
             "--output",
-            f"ros:{ecg}",
+            f"ros:{source}",
             "--num-channels",
             "1",
             "--output-frame",
@@ -80,23 +109,43 @@ def test_receiver_output_round_trips_and_replays_deterministically(
         ),
         runs_to_end=True,
     )
-    live = h.record("live", [ecg], [rx_live, sim])
+    # /ecg has two readers, the recorder and rx_window: the relay lets rx_live's frames through
+    # only once both are matched, so each of them sees every frame (see offline_harness).
+    live = h.record(
+        "live",
+        [ecg, win],
+        [rx_window(), rx_live, sim],
+        relays=[Relay(source, ecg, Float64MultiArray, subscribers=2)],
+    )
 
-    # the live leg: every simulated sample reached the bag, once, in order, evenly spaced
+    # the live input: every simulated sample reached the bag, once, in order, evenly spaced
     frames = [f for _, f in h.decoded(live, ecg, _frame)]
     ts, vs = concat_new_samples(frames, 13, 0)
     assert len(ts) == int(RATE * SECONDS), h.logs
     np.testing.assert_allclose(np.diff(ts), 1 / RATE, rtol=1e-6)
     assert all(f.num_channels == 1 for f in frames)
+    # the live output: rx_window ran in the live session and windowed exactly those samples
+    live_windows = [f for _, f in h.decoded(live, win, _frame)]
+    assert len(live_windows) >= len(ts) // 15, h.logs
+    wts, wvs = concat_new_samples(live_windows, 20, 5)
+    np.testing.assert_array_equal(wts, ts)
+    np.testing.assert_array_equal(wvs, vs)
 
-    # (1) replay to a subscriber: every frame and timestamp round-trips, bit for bit
+    # (1) replay to a subscriber: every input frame and timestamp round-trips, bit for bit
     collector = RosFrameCollector(ros_context, f"harness_{uid}")
     try:
         got = collector.subscribe_frames(ecg)
-        from helpers import NodeProcess
-
         with NodeProcess(
-            "replayer", str(live), "--rate", "5", "--wait-for-subscribers", "30", "--delay", "0.3"
+            "replayer",
+            str(live),
+            "--rate",
+            "5",
+            "--topics",
+            ecg,
+            "--wait-for-subscribers",
+            "30",
+            "--delay",
+            "0.3",
         ) as player:
             assert player.wait(60) == 0, player.output
         wait_until(lambda: len(got) == len(frames), 10, lambda: f"{len(got)}/{len(frames)} frames")
@@ -105,34 +154,8 @@ def test_receiver_output_round_trips_and_replays_deterministically(
     for have, want in zip(got, frames, strict=True):
         assert _same_frame(have, want)
 
-    # (2) replay into fresh nodes, twice: identical outputs, holding exactly the recorded samples
-    def rx_window() -> NodeSpec:
-        return NodeSpec(
-            "physio_receiver",
-            (
-                "--input",
-                f"ros:{ecg}",
-                "--output",
-                f"ros:{win}",
-                "--num-channels",
-                "1",
-                "--output-frame",
-                "20",
-                "--sample-overlap",
-                "5",
-                "--sampling-rate",
-                str(RATE),
-                "--wait-for-consumers",
-                "60",
-            ),
-            ready="connected",
-        )
-
-    run1 = h.replay("replay1", live, [ecg], [rx_window()], [win])
-    run2 = h.replay("replay2", live, [ecg], [rx_window()], [win])
-    n = h.assert_same(run1, run2, {win: win}, _frame, _same_frame)
-    windows = [f for _, f in h.decoded(run1, win, _frame)]
-    assert n == len(windows) >= len(ts) // 15
-    wts, wvs = concat_new_samples(windows, 20, 5)
-    np.testing.assert_array_equal(wts, ts)
-    np.testing.assert_array_equal(wvs, vs)
+    # (2) the recorded input into fresh rx_window nodes, twice: each reproduces the live output
+    for run in ("replay1", "replay2"):
+        out = h.replay(run, live, [ecg], [rx_window()], [win])
+        n = h.assert_same(live, out, {win: win}, _frame, _same_frame)
+        assert n == len(live_windows), (run, n, len(live_windows))

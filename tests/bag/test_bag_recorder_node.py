@@ -1,4 +1,4 @@
-"""recorder node end to end: real rclpy publishers, the node as a subprocess, SIGINT and SIGKILL."""
+"""recorder node end to end: real rclpy publishers, the node as a subprocess, SIGINT/SIGTERM, SIGKILL."""
 
 from __future__ import annotations
 
@@ -40,7 +40,12 @@ def _wait_recorded(rec: NodeProcess, pub, topic: str) -> None:
     time.sleep(0.2)  # let the subscriber side finish matching too
 
 
-def test_records_all_topics_including_late_ones(tmp_path: Path, prefix: str, node) -> None:
+@pytest.mark.parametrize("stop_signal", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_records_all_topics_including_late_ones(
+    tmp_path: Path, prefix: str, node, stop_signal: signal.Signals
+) -> None:
+    """Record, then stop with SIGINT (Ctrl-C) or SIGTERM (a launcher, systemd): exit 0, a
+    summary, a complete bag with metadata.yaml."""
     bag = tmp_path / "all"
     chatter = node.create_publisher(String, f"{prefix}/chatter", 10)
     frames = node.create_publisher(Float64MultiArray, f"{prefix}/frames", 10)
@@ -64,9 +69,11 @@ def test_records_all_topics_including_late_ones(tmp_path: Path, prefix: str, nod
         late.publish(String(data="after discovery"))
         wait_until(lambda: "msg/s" in rec.output, 10, "a status report")
         time.sleep(0.5)
-        assert rec.stop(signal.SIGINT) == 0, rec.output
+        assert rec.stop(stop_signal) == 0, rec.output
         out = rec.output
+    assert f"{stop_signal.name} received: closing the bag" in out, out
     assert "bag closed" in out and f"{prefix}/chatter [std_msgs/msg/String]: 150 messages" in out, out
+    assert (bag / "metadata.yaml").is_file()
 
     meta = check_bag(bag)  # rosbag2 checks, summary counts, installed type hashes
     topics = {t["topic_metadata"]["name"]: t for t in meta["topics_with_message_count"]}
@@ -110,9 +117,12 @@ def test_refuses_to_overwrite_and_bad_arguments(tmp_path: Path) -> None:
 
 
 def test_sigkill_loses_at_most_the_flush_period_and_repair_works(tmp_path: Path, prefix: str, node) -> None:
-    """Kill -9 mid-recording: what was received more than flush_period (+ margin) before the
-    kill is on disk; the bag then reads (with a warning) and repairs into a complete bag."""
+    """Kill -9 mid-recording: everything from the first message sent up to flush_period
+    (+ margin) before the kill is on disk; the bag then reads (with a warning) and repairs
+    into a complete bag."""
     flush = 0.5
+    margin = 1.5  # scheduling on a loaded 2-core machine; the design bound is flush + 0.125 s
+    seconds = 5.0  # so that most of what was sent lies before the bound and must be recovered
     bag = tmp_path / "killed"
     pub = node.create_publisher(String, f"{prefix}/count", 100)
     with NodeProcess(
@@ -126,16 +136,17 @@ def test_sigkill_loses_at_most_the_flush_period_and_repair_works(tmp_path: Path,
         str(flush),
     ) as rec:
         _wait_recorded(rec, pub, f"{prefix}/count")
-        sent = 0
-        t_end = time.monotonic() + 3.0
+        sent_at: list[float] = []  # monotonic send time of message i (its data is str(i))
+        t_end = time.monotonic() + seconds
         while time.monotonic() < t_end:
-            pub.publish(String(data=str(sent)))
-            sent += 1
+            sent_at.append(time.monotonic())
+            pub.publish(String(data=str(len(sent_at) - 1)))
             time.sleep(0.002)
-        kill_ns = time.time_ns()
+        kill_mono, kill_ns = time.monotonic(), time.time_ns()
         rec.proc.send_signal(signal.SIGKILL)
         assert rec.proc.wait(10) == -signal.SIGKILL
     assert not (bag / "metadata.yaml").exists()
+    sent = len(sent_at)
 
     from rclpy.serialization import deserialize_message
 
@@ -144,14 +155,24 @@ def test_sigkill_loses_at_most_the_flush_period_and_repair_works(tmp_path: Path,
         (m.log_time, int(deserialize_message(m.data, String).data)) for _c, _s, m in scanner.messages()
     ]
     values = [v for _, v in recovered]
-    assert values == list(range(values[0], values[0] + len(values)))  # contiguous, in order
-    loss_s = (kill_ns - recovered[-1][0]) / 1e9
+    # the first message sent is there, and from it on every message, once, in order
+    assert values and values[0] == 0, values[:5]
+    assert values == list(range(len(values))), "recovered messages are not 0, 1, 2, ... in order"
+    # bounded loss: what was sent more than flush + margin before the kill is all there
+    must_have = sum(1 for t in sent_at if t < kill_mono - (flush + margin))
+    lost = sent - len(values)
+    lost_tail_s = kill_mono - sent_at[len(values)] if lost else 0.0  # oldest lost message's age
+    newest_s = (kill_ns - recovered[-1][0]) / 1e9  # by the recorder's receive stamp
     print(
-        f"\nSIGKILL: sent {sent}, recovered {len(values)}, newest recovered message received "
-        f"{loss_s:.3f} s before the kill (flush period {flush} s)"
+        f"\nSIGKILL after {seconds:g} s: sent {sent}, recovered {len(values)} (all of the first "
+        f"{must_have} required), lost the last {lost} = {lost_tail_s:.3f} s of sending; newest recovered "
+        f"message received {newest_s:.3f} s before the kill (flush period {flush} s)"
     )
-    assert len(values) > sent / 3
-    assert loss_s < flush + 2.0  # margin for a loaded 2-core machine; the design bound is flush + 0.125 s
+    assert must_have > sent / 2  # the bound below is a real test, not a vacuous one
+    assert len(values) >= must_have, (
+        f"lost messages sent up to {lost_tail_s:.3f} s before the kill; the bound is {flush + margin} s"
+    )
+    assert lost_tail_s <= flush + margin and newest_s <= flush + margin
 
     exe = str(Path(sys.prefix) / "bin")
     info = subprocess.run([f"{exe}/replayer", str(bag), "--info"], capture_output=True, text=True, timeout=60)

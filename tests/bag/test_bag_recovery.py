@@ -68,6 +68,39 @@ def test_damaged_chunk_is_skipped_and_the_rest_recovered(tmp_path: Path) -> None
     assert got == list(range(10)) + list(range(20, 30))
     list(scanner.messages())
     assert scanner.report.corrupt_chunks == 1
+    assert scanner.report.damage_offset == start and f"chunk record at byte {start}" in scanner.report.damage
+
+
+def test_reader_names_the_damage_and_refuses_a_bag_without_one_readable_message(tmp_path: Path) -> None:
+    writer = _killed_bag(tmp_path / "k", n=30, per_chunk=10)
+    data = bytearray(writer.path.read_bytes())
+    chunks = [o for op, _n, o in _record_offsets(bytes(data)) if op == 0x06]
+    # a damaged second chunk: the other two are read, the warning names the chunk's offset
+    damaged = bytearray(data)
+    damaged[chunks[1] + 80 : chunks[1] + 90] = b"\xff" * 10
+    (tmp_path / "damaged.mcap").write_bytes(bytes(damaged))
+    reader = BagReader(tmp_path / "damaged.mcap")
+    assert reader.message_count == 20
+    assert any(
+        f"damaged chunk record at byte {chunks[1]}" in w and "20 message(s)" in w for w in reader.warnings
+    )
+    # cut inside the first chunk: damage and no message at all -> corrupt or truncated
+    (tmp_path / "cut.mcap").write_bytes(bytes(data[: chunks[0] + 40]))
+    with pytest.raises(
+        BagError, match=rf"cut\.mcap is corrupt or truncated: chunk record at byte {chunks[0]}"
+    ):
+        BagReader(tmp_path / "cut.mcap")
+    # cut inside the second chunk: the first is read, with a warning naming where the file is cut
+    (tmp_path / "cut2.mcap").write_bytes(bytes(data[: chunks[1] + 40]))
+    reader = BagReader(tmp_path / "cut2.mcap")
+    assert reader.message_count == 10
+    assert any(f"chunk record at byte {chunks[1]} is cut short" in w for w in reader.warnings)
+    # the first chunk damaged, nothing else: refused too
+    only = bytearray(data[: chunks[1]])
+    only[chunks[0] + 80 : chunks[0] + 90] = b"\xff" * 10
+    (tmp_path / "only.mcap").write_bytes(bytes(only))
+    with pytest.raises(BagError, match=f"damaged chunk record at byte {chunks[0]}"):
+        BagReader(tmp_path / "only.mcap")
 
 
 def _record_offsets(data: bytes):

@@ -2,8 +2,10 @@
 
 Complete files are read through their summary (chunk indexes, log-time order). A file
 whose writer died (no summary) is read with the damage-tolerant scanner of
-:mod:`~hri_physio_bridge.bag.recovery`, in file order, with a warning; every problem
-becomes a one-line :class:`~hri_physio_bridge.bag.errors.BagError`.
+:mod:`~hri_physio_bridge.bag.recovery`, in file order, with a warning (naming the first
+damaged or cut-short record, if any). A bag with damaged records and not one readable
+message is refused as corrupt or truncated, which a valid bag without messages is not.
+Every problem becomes a one-line :class:`~hri_physio_bridge.bag.errors.BagError`.
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ class _File:
     counts: dict[int, int] = field(default_factory=dict)
     start_ns: int | None = None
     end_ns: int | None = None
+    damage: str = ""  # incomplete files: the first damaged or cut-short record ("" if none)
 
 
 def _summary(path: Path) -> _File:
@@ -75,7 +78,9 @@ def _scan(path: Path) -> _File:
     for channel, _schema, _msg in scanner.messages():
         counts[channel.id] = counts.get(channel.id, 0) + 1
     rep = scanner.report
-    return _File(path, False, scanner.channels, scanner.schemas, counts, rep.first_ns, rep.last_ns)
+    return _File(
+        path, False, scanner.channels, scanner.schemas, counts, rep.first_ns, rep.last_ns, rep.damage
+    )
 
 
 class BagReader:
@@ -107,10 +112,21 @@ class BagReader:
         else:
             raise BagError(f"{self.path} is neither a rosbag2 directory nor an .mcap file")
         self._files = [_summary(p) for p in paths]
+        damaged = [f for f in self._files if f.damage]
+        if damaged and not any(sum(f.counts.values()) for f in self._files):
+            f = damaged[0]
+            raise BagError(
+                f"{f.path} is corrupt or truncated: {f.damage}; not one message could be read from it"
+            )
         for f in self._files:
             if not f.complete and (metadata is not None or self.path.is_file()):
                 self.warnings.append(
                     f"{f.path.name} has no summary (writer did not finish); reading what was flushed"
+                )
+            if f.damage:
+                self.warnings.append(
+                    f"{f.path.name} is truncated or damaged: {f.damage}; reading the "
+                    f"{sum(f.counts.values())} message(s) that are intact"
                 )
         self._collect_topics(metadata)
 

@@ -51,10 +51,19 @@ class ScanReport:
     problem: str = ""  # why the scan stopped before a footer
     first_ns: int | None = None
     last_ns: int | None = None
+    # The first damaged or cut-short record ("" / None if none; a file that merely ends
+    # without a footer, as a killed writer's does between chunks, is not damaged).
+    damage: str = ""
+    damage_offset: int | None = None
 
     @property
     def lost_bytes(self) -> int:
         return self.file_bytes - self.valid_bytes
+
+    def note_damage(self, offset: int, what: str) -> None:
+        """Remember the first damaged record (later ones add nothing a user can act on)."""
+        if self.damage_offset is None:
+            self.damage_offset, self.damage = offset, what
 
 
 class McapScanner:
@@ -92,21 +101,28 @@ class McapScanner:
                 return
             if len(head) < 9:
                 rep.problem = f"truncated record header at byte {offset}"
+                rep.note_damage(offset, rep.problem)
                 return
             opcode, length = struct.unpack("<BQ", head)
             if offset + 9 + length > size:
-                rep.problem = f"record at byte {offset} is cut short ({size - offset - 9} of {length} bytes)"
+                rep.problem = (
+                    f"{_opname(opcode)} record at byte {offset} is cut short "
+                    f"({size - offset - 9} of {length} bytes)"
+                )
+                rep.note_damage(offset, rep.problem)
                 return
             body = fh.read(length)
-            offset += 9 + length
+            start, offset = offset, offset + 9 + length
             try:
                 records = self._parse(opcode, body)
             except Exception as exc:
                 if opcode == Opcode.CHUNK:
                     rep.corrupt_chunks += 1
+                    rep.note_damage(start, f"damaged chunk record at byte {start}: {exc}")
                     rep.valid_bytes = offset
                     continue
-                rep.problem = f"damaged {_opname(opcode)} record at byte {offset - 9 - length}: {exc}"
+                rep.problem = f"damaged {_opname(opcode)} record at byte {start}: {exc}"
+                rep.note_damage(start, rep.problem)
                 return
             rep.valid_bytes = offset
             for rec in records:
