@@ -12,7 +12,7 @@ its counter (no loss, no duplicate), and the receiver's sustained rate is
 reported as a ratio of the minimal relay's. CPU% and peak RSS of the forwarding
 process come from /proc.
 
-Run:  scripts/bench bench/bench_receiver.py   (or: source scripts/env.sh; python bench/bench_receiver.py)
+Run:  source scripts/env.sh && python bench/bench_receiver.py
 """
 
 from __future__ import annotations

@@ -157,6 +157,11 @@ def test_cast_for_output_refuses_what_it_cannot_hold() -> None:
         cast_for_output(np.array([300.0]), np.dtype(np.int8), "w")
     with pytest.raises(StreamMismatchError, match="NaN"):
         cast_for_output(np.array([np.nan]), np.dtype(np.int32), "w")
+    # int64 stays exact (no detour through float64), and 2**63 as a float does not wrap around.
+    big = np.array([2**63 - 1, 2**53 + 1, -(2**63)], dtype=np.int64)
+    np.testing.assert_array_equal(cast_for_output(big, np.dtype(np.int64), "w"), big)
+    with pytest.raises(StreamMismatchError, match="outside"):
+        cast_for_output(np.array([2.0**63]), np.dtype(np.int64), "w")
 
 
 # -- CSV ------------------------------------------------------------------------

@@ -228,6 +228,134 @@ def test_stream_never_appears_names_it_and_lists_seen(lsl_name: str) -> None:
     del other
 
 
+@pytest.mark.parametrize("waiting_for", ["input", "consumer"])
+def test_ctrl_c_while_waiting_exits_at_once(lsl_name: str, waiting_for: str) -> None:
+    """SIGINT during a long wait (input not there yet, or no consumer) ends it, exit code 0."""
+    tag = lsl_name.split("/")[0]
+    if waiting_for == "input":
+        outlet = None
+        args = ["--input", f"lsl:{lsl_name}-never", "--resolve-timeout", "30"]
+        waiting, stopped = "waiting up to 30 s for it to appear", "stopped before the input"
+    else:
+        outlet = counter_outlet(lsl_name, channels=1)
+        args = ["--input", f"lsl:{lsl_name}", "--wait-for-consumers", "30"]
+        waiting, stopped = "waiting up to 30 s for a consumer", "stopped while waiting for a consumer"
+    with NodeProcess("physio_receiver", *args, "--output", f"ros:/test/{tag}/ctrl_c") as rx:
+        rx.wait_for_output(waiting, 30)
+        time.sleep(0.5)
+        start = time.monotonic()
+        code = rx.stop(signal.SIGINT, timeout=10)
+        elapsed = time.monotonic() - start
+    assert code == 0, rx.output
+    assert elapsed < 3.0, f"took {elapsed:.1f} s to exit after SIGINT:\n{rx.output}"
+    assert "SIGINT received" in rx.output and stopped in rx.output, rx.output
+    assert "did not appear" not in rx.output and "Traceback" not in rx.output, rx.output
+    del outlet
+
+
+def test_ros_input_bad_messages_rejected_counted_and_rate_limited(lsl_name: str, ros_context,
+                                                                 tmp_path: Path) -> None:
+    """Wrong channel count and broken layouts are rejected, named, counted; good samples all pass."""
+    from rclpy.node import Node
+    from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+    from hri_physio_bridge.frames import Frame, frame_to_msg
+    from hri_physio_bridge.streamers.ros import frame_qos
+
+    topic = f"/test/{lsl_name.split('/')[0]}/bad_in"
+    out_csv = tmp_path / "good.csv"
+    node = Node("bad_pub", context=ros_context)
+    pub = node.create_publisher(Float64MultiArray, topic, frame_qos())
+
+    def good(start: int, n: int) -> Float64MultiArray:
+        idx = np.arange(start, start + n)
+        return frame_to_msg(Frame(7000.0 + idx / RATE, np.column_stack([idx, -idx])))
+
+    def broken_layout() -> Float64MultiArray:
+        msg = good(0, 2)
+        msg.data = list(msg.data)[:-1]  # one value short of 2 samples x 3 columns
+        return msg
+
+    def unlabelled() -> Float64MultiArray:
+        msg = good(0, 2)
+        msg.layout.dim = [MultiArrayDimension(label="rows", size=2, stride=6), msg.layout.dim[1]]
+        return msg
+
+    with NodeProcess(
+        "physio_receiver", "--input", f"ros:{topic}", "--output", f"csv:{out_csv}",
+        "--num-channels", "2", "--output-frame", "5", "--status-period", "0.5",
+    ) as rx:
+        rx.wait_for_output("connected")
+        wait_until(lambda: pub.get_subscription_count() > 0, 20, "receiver subscription")
+        for i in range(0, 100, 10):
+            pub.publish(good(i, 10))
+        for k in range(5):
+            idx = np.arange(3)
+            pub.publish(frame_to_msg(Frame(8000.0 + k + idx / RATE, np.column_stack([idx, idx, idx]))))
+        for _ in range(3):
+            pub.publish(broken_layout())
+        pub.publish(unlabelled())
+        for i in range(100, 200, 10):
+            pub.publish(good(i, 10))
+        rx.wait_for_output("received 200 samples", 30)
+        assert rx.proc.poll() is None, rx.output  # still running after the bad messages
+        assert rx.stop(signal.SIGINT) == 0, rx.output
+    node.destroy_node()
+    table = np.loadtxt(out_csv, delimiter=",", skiprows=1)
+    check_counter(table[:, 0], table[:, 1:], 7000.0 + np.arange(200) / RATE)
+    lines = rx.output.splitlines()
+    channels = [ln for ln in lines if "message rejected: frame has 3 channel(s), num_channels is 2" in ln]
+    layout = [ln for ln in lines if "message rejected: malformed frame layout" in ln]
+    # Within 5 s: one line per kind, the first of each, however many messages came.
+    assert len(channels) == 1 and "(1 message(s) rejected so far" in channels[0], rx.output
+    assert len(layout) == 1 and "layout says 2 samples x 3 columns but data holds 5 values" in layout[0]
+    assert "(1 message(s) rejected so far" in layout[0], rx.output
+    assert "'rejected_messages': 9" in rx.output, rx.output  # every one counted
+    assert "Traceback" not in rx.output
+
+
+def test_conf_file_configures_the_receiver_end_to_end(lsl_name: str, tmp_path: Path,
+                                                      collector: RosFrameCollector) -> None:
+    """Every receiver option below comes from the YAML file; none from the command line."""
+    topic = f"/test/{lsl_name.split('/')[0]}/conf"
+    log = tmp_path / "conf_log.csv"
+    conf = tmp_path / "receiver.yaml"
+    conf.write_text(
+        "# the seed's receiver keys\n"
+        f"input: lsl:{lsl_name}\n"
+        f"output: ros:{topic}\n"
+        "dtype: int16\n"
+        "sampling_rate: 130\n"
+        "input_frame: 16\n"
+        "output_frame: 6\n"
+        "num_channels: 2\n"
+        "sample_overlap: 2\n"
+        "buffer_length: 600\n"
+        "log_data: true\n"
+        f"log_name: {log}\n"
+        "channel_names: [count, neg]\n"
+        "wait_for_consumers: 20\n"
+    )
+    got = collector.subscribe_frames(topic)
+    outlet = counter_outlet(lsl_name, fmt=pylsl.cf_int16)  # the default dtype (float64) would refuse it
+    with NodeProcess("physio_receiver", "--conf", str(conf)) as rx:
+        rx.wait_for_output("has a consumer")
+        assert "2 ch int16 @ 130 Hz, frames of 6 (overlap 2)" in rx.output, rx.output
+        wait_until(outlet.have_consumers, 20, "discovery")
+        stamps = push_counter(outlet, 0, 302, pylsl.local_clock())  # 302 = 6 + 74 frames x 4 new
+        wait_until(lambda: len(got) >= 75, 30,
+                   lambda: f"75 frames, got {len(got)}\n{rx.output}")
+        assert rx.stop(signal.SIGINT) == 0, rx.output
+    assert {f.num_samples for f in got} == {6}
+    assert all(f.channels == ("count", "neg") for f in got)
+    ts, vs = concat_new_samples(got, 6, 2)
+    check_counter(ts, vs, stamps)
+    for a, b in itertools.pairwise(got):
+        np.testing.assert_array_equal(a.values[-2:], b.values[:2])
+    logged = np.loadtxt(log, delimiter=",", skiprows=1)
+    np.testing.assert_array_equal(logged[:, 1], np.arange(302))
+
+
 @pytest.mark.parametrize(
     "fmt,channels,args,message",
     [

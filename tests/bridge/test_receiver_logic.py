@@ -5,6 +5,8 @@ from __future__ import annotations
 import logging
 import queue
 import threading
+import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -36,7 +38,8 @@ class MemorySource(Streamer):
         self.opens = 0
         self.exhausted = False
 
-    def open_input(self, expected: StreamSpec | None = None, timeout: float = 10.0) -> StreamSpec:
+    def open_input(self, expected: StreamSpec | None = None, timeout: float = 10.0,
+                   stop: threading.Event | None = None) -> StreamSpec:
         if not self.available.wait(timeout):
             raise StreamNotFoundError("memory source not available")
         self.opens += 1
@@ -64,13 +67,16 @@ class MemorySource(Streamer):
 class MemorySink(Streamer):
     scheme = "mem"
 
-    def __init__(self, fail_first: int = 0) -> None:
+    def __init__(self, fail_first: int = 0, delay: float = 0.0, consumers: bool = True) -> None:
         super().__init__("sink")
         self.frames: list[Frame] = []
         self.fail_first = fail_first
+        self.delay = delay  # seconds per publish: a slow consumer
+        self.consumers = consumers
         self.closed = False
 
-    def open_input(self, expected: StreamSpec | None = None, timeout: float = 10.0) -> StreamSpec:
+    def open_input(self, expected: StreamSpec | None = None, timeout: float = 10.0,
+                   stop: threading.Event | None = None) -> StreamSpec:
         raise StreamerError("output only")
 
     def open_output(self, spec: StreamSpec) -> None:
@@ -83,7 +89,12 @@ class MemorySink(Streamer):
         if self.fail_first > 0:
             self.fail_first -= 1
             raise StreamerError("sink hiccup")
+        if self.delay:
+            time.sleep(self.delay)
         self.frames.append(frame)
+
+    def has_consumers(self) -> bool:
+        return self.consumers
 
     def close(self) -> None:
         self.closed = True
@@ -94,14 +105,20 @@ def chunk(start: int, n: int, rate: float = 100.0, channels: int = 1) -> Frame:
     return Frame(idx / rate, np.column_stack([idx] * channels))
 
 
-def make(tmp_path: Path | None = None, **overrides) -> tuple[PhysioReceiver, MemorySource, MemorySink]:
+def make(tmp_path: Path | None = None, monotonic: Callable[[], float] = time.monotonic,
+         **overrides) -> tuple[PhysioReceiver, MemorySource, MemorySink]:
     opts = {"input": "mem:source", "output": "mem:sink", "sampling_rate": 100.0, "output_frame": 4,
             "buffer_length": 64}
     opts.update(overrides)
     cfg = ReceiverConfig.from_mapping(opts)
     src = MemorySource(StreamSpec("src", channel_count=cfg.num_channels, nominal_rate=cfg.sampling_rate))
     sink = MemorySink()
-    return PhysioReceiver(cfg, src, sink, log=logging.getLogger("test")), src, sink
+    rx = PhysioReceiver(cfg, src, sink, log=logging.getLogger("test"), monotonic=monotonic)
+    return rx, src, sink
+
+
+def log_lines(caplog: pytest.LogCaptureFixture, text: str) -> list[str]:
+    return [r.getMessage() for r in caplog.records if text in r.getMessage()]
 
 
 def run_to_end(rx: PhysioReceiver, src: MemorySource, chunks: list[Frame]) -> None:
@@ -188,6 +205,25 @@ def test_wrong_channel_count_chunk_is_rejected_and_counted() -> None:
     assert rx.stats.published_samples == 8
 
 
+def test_rejected_chunks_are_all_counted_but_logged_at_most_every_5_s(
+        caplog: pytest.LogCaptureFixture) -> None:
+    now = [0.0]
+    rx, _, _ = make(num_channels=2, monotonic=lambda: now[0])
+    rx.open()
+    with caplog.at_level(logging.ERROR, logger="test"):
+        for t in (0.0, 1.0, 4.9, 5.5, 6.0):
+            now[0] = t
+            rx._accept(chunk(0, 4, channels=3))
+    rx.stop()
+    assert rx.stats.rejected_chunks == 5 and rx.stats.received_samples == 0
+    assert log_lines(caplog, "rejected") == [
+        "mem:source: chunk with 3 channel(s) rejected, num_channels is 2 "
+        "(1 chunk(s) rejected so far; repeats are summarised at most every 5 s)",
+        "mem:source: chunk with 3 channel(s) rejected, num_channels is 2 "
+        "(3 chunk(s) rejected since the last report, 4 so far)",
+    ]
+
+
 def test_nonfinite_samples_are_counted_and_forwarded(caplog: pytest.LogCaptureFixture) -> None:
     rx, src, sink = make()
     bad = chunk(0, 4)
@@ -244,6 +280,68 @@ def test_drop_oldest_overflow_reported_as_gap() -> None:
     rx.stop()
     assert [(g.count, g.reason.startswith("buffer overflow")) for g in rx.stats.gaps] == [(4, True)]
     np.testing.assert_array_equal(sink.frames[0].values[:, 0], np.arange(4, 12))
+
+
+def test_drop_oldest_overflow_is_logged_with_the_count_since_the_last_line(
+        caplog: pytest.LogCaptureFixture) -> None:
+    now = [0.0]
+    rx, _, sink = make(overflow_policy="drop_oldest", buffer_length=8, output_frame=8,
+                         monotonic=lambda: now[0])
+    rx.open()
+    with caplog.at_level(logging.WARNING, logger="test"):
+        rx._accept(chunk(0, 8))
+        rx._accept(chunk(8, 4))  # full: 0..3 dropped, logged at once
+        now[0] = 2.0
+        rx._accept(chunk(12, 2))  # 4..5 dropped within 5 s: counted, not logged
+        now[0] = 6.0
+        rx._accept(chunk(14, 3))  # 6..8 dropped: logged with everything since the last line
+        rx.stop()
+    assert log_lines(caplog, "buffer overflow") == [
+        "buffer overflow: dropped 4 oldest sample(s) t=0.0000..0.0300 "
+        "(4 sample(s) dropped so far; repeats are summarised at most every 5 s)",
+        "buffer overflow: dropped 3 oldest sample(s) t=0.0600..0.0800 "
+        "(5 sample(s) dropped since the last report, 9 so far)",
+    ]
+    # Every drop is still a gap in the stats, and the survivors are forwarded.
+    assert [(g.first_t, g.last_t, g.count) for g in rx.stats.gaps] == [
+        (0.0, 0.03, 4), (0.04, 0.05, 2), (0.06, 0.08, 3)
+    ]
+    np.testing.assert_array_equal(np.concatenate([f.values[:, 0] for f in sink.frames]), np.arange(9, 17))
+
+
+def test_block_policy_with_a_slow_consumer_loses_nothing_and_says_so_once(
+        caplog: pytest.LogCaptureFixture) -> None:
+    rx, src, _ = make(overflow_policy="block", buffer_length=8, output_frame=4, monotonic=lambda: 0.0)
+    rx.sink = sink = MemorySink(delay=0.005)
+    with caplog.at_level(logging.WARNING, logger="test"):
+        run_to_end(rx, src, [chunk(i, 5) for i in range(0, 200, 5)])
+    values = np.concatenate([f.values[:, 0] for f in sink.frames])
+    stamps = np.concatenate([f.timestamps for f in sink.frames])
+    np.testing.assert_array_equal(values, np.arange(200))  # every sample once, in order
+    np.testing.assert_array_equal(stamps, np.arange(200) / 100.0)
+    assert rx.stats.gaps == [] and rx.buffer.dropped_samples == 0
+    assert rx.buffer.overflow_events > 1  # the producer did wait for the consumer, many times
+    assert log_lines(caplog, "buffer full") == [
+        "buffer full: producer waits for the consumer (raise buffer_length?) "
+        "(1 wait(s) so far; repeats are summarised at most every 5 s)"
+    ]
+
+
+def test_request_stop_ends_the_wait_for_a_consumer(caplog: pytest.LogCaptureFixture) -> None:
+    rx, src, sink = make(wait_for_consumers=30.0)
+    rx.sink = sink = MemorySink(consumers=False)
+    rx.open()
+    threading.Timer(0.2, rx.request_stop).start()
+    start = time.monotonic()
+    with caplog.at_level(logging.INFO, logger="test"):
+        rx.start()
+    assert time.monotonic() - start < 2.0
+    src.chunks.put(chunk(0, 4))
+    time.sleep(0.2)
+    assert rx.stats.received_samples == 0  # no threads were started
+    rx.stop()
+    assert sink.closed
+    assert log_lines(caplog, "stopped while waiting for a consumer on mem:sink")
 
 
 @pytest.mark.parametrize(

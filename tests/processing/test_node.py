@@ -96,6 +96,17 @@ def test_clean_exit_on_signal_while_waiting(sig: int, lsl_name: str) -> None:
     assert "Traceback" not in proc.output
 
 
+def test_ctrl_c_while_an_lsl_input_has_not_appeared(lsl_name: str) -> None:
+    args = ("--input", f"lsl:{lsl_name}/never", "--resolve-timeout", "60", "--output-prefix",
+            f"/test/{lsl_name.split('/')[0]}/never")
+    with NodeProcess("neurokit_processor", *args) as proc:
+        time.sleep(3.0)  # well inside the resolve timeout
+        t0 = time.monotonic()
+        assert proc.stop(signal.SIGINT, timeout=10) == 0, proc.output
+        assert time.monotonic() - t0 < 3.0, proc.output
+    assert "Traceback" not in proc.output
+
+
 def publish_stream(ros_context, topic: str, t: np.ndarray, x: np.ndarray, chunks: list[tuple[int, int]],
                    ready) -> None:
     """Publish frames like physio_receiver would, waiting for the processor's subscription."""

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from hri_physio_bridge.frames import Frame
+from hri_physio_bridge.rate_limit import RateLimitedLog
 from hri_physio_bridge.ring_buffer import BufferClosed, Gap, OverflowPolicy, RingBuffer
 from hri_physio_bridge.streamers.base import (
     Streamer,
@@ -202,12 +203,19 @@ class PhysioReceiver:
         self._finished = threading.Event()
         self._lock = threading.Lock()
         self._last_nonfinite_warning = -math.inf
+        # Rejected chunks and overflows can repeat many times a second: one line per kind every 5 s.
+        self._rejections = RateLimitedLog(lambda text: self.log.error(text), monotonic=monotonic)
+        self._overflows = RateLimitedLog(lambda text: self.log.warning(text), monotonic=monotonic)
 
     # -- lifecycle -----------------------------------------------------------
     def open(self) -> StreamSpec:
-        """Connect input and output. Raises StreamNotFoundError / StreamMismatchError."""
+        """Connect input and output. Raises StreamNotFoundError / StreamMismatchError.
+
+        Raises OpenCancelled when :meth:`request_stop` comes while waiting for the input.
+        """
         cfg = self.config
-        spec = self.source.open_input(cfg.expected_spec(), timeout=cfg.resolve_timeout)
+        self.log.info(f"opening {self.source.uri} (waiting up to {cfg.resolve_timeout:g} s for it to appear)")
+        spec = self.source.open_input(cfg.expected_spec(), timeout=cfg.resolve_timeout, stop=self._stop)
         # The configuration is the contract; the stream's own labels win when it has them.
         channels = spec.channels if len(spec.channels) == cfg.num_channels else cfg.expected_spec().channels
         out_spec = StreamSpec(
@@ -247,6 +255,8 @@ class PhysioReceiver:
         if self.buffer is None:
             self.open()
         self._wait_for_consumers()
+        if self._stop.is_set():
+            return  # stopped while waiting: stop() closes both ends
         self._threads = [
             threading.Thread(target=self._guard(self._produce), name="receiver-producer", daemon=True),
             threading.Thread(target=self._guard(self._consume), name="receiver-consumer", daemon=True),
@@ -259,12 +269,16 @@ class PhysioReceiver:
         limit = self.config.wait_for_consumers
         if limit <= 0:
             return
+        self.log.info(f"waiting up to {limit:g} s for a consumer on {self.sink.uri}")
         deadline = self._monotonic() + limit
         while not self.sink.has_consumers():
+            if self._stop.is_set():
+                self.log.info(f"stopped while waiting for a consumer on {self.sink.uri}")
+                return
             if self._monotonic() >= deadline:
                 self.log.warning(f"no consumer on {self.sink.uri} after {limit:g} s; starting anyway")
                 return
-            time.sleep(0.02)
+            self._stop.wait(0.02)
         self.log.info(f"{self.sink.uri} has a consumer")
 
     def _guard(self, fn: Callable[[], None]) -> Callable[[], None]:
@@ -292,6 +306,20 @@ class PhysioReceiver:
 
     def wait(self, timeout: float | None = None) -> bool:
         return self._finished.wait(timeout)
+
+    def request_stop(self) -> None:
+        """Ask every wait (input, consumers, threads) to end soon; safe from a signal handler.
+
+        :meth:`stop` still does the flushing and closing.
+        """
+        self._stop.set()
+
+    def status(self) -> dict[str, Any]:
+        """The counters, plus the input messages the transport rejected (malformed, wrong shape)."""
+        with self._lock:
+            status = self.stats.as_dict()
+        status["rejected_messages"] = self.source.bad_messages
+        return status
 
     def pause(self) -> None:
         """Hold publishing; input is still logged and buffered."""
@@ -322,7 +350,7 @@ class PhysioReceiver:
         self.source.close()
         self.sink.close()
         self.stats.connected = False
-        self.log.info(f"stopped: {self.stats.as_dict()}")
+        self.log.info(f"stopped: {self.status()}")
 
     # -- producer ------------------------------------------------------------
     def _produce(self) -> None:
@@ -344,9 +372,11 @@ class PhysioReceiver:
         cfg = self.config
         if chunk.num_channels != cfg.num_channels:
             self.stats.rejected_chunks += 1
-            self.log.error(
+            self._rejections.report(
+                "channels",
                 f"{self.source.uri}: chunk with {chunk.num_channels} channel(s) rejected, "
-                f"num_channels is {cfg.num_channels}"
+                f"num_channels is {cfg.num_channels}",
+                "chunk(s) rejected",
             )
             return
         # Log first: the CSV is the record of what arrived, whatever happens next.
@@ -404,7 +434,7 @@ class PhysioReceiver:
             raise exc
         while not self._stop.is_set():
             try:
-                self.source.open_input(self.config.expected_spec(), timeout=1.0)
+                self.source.open_input(self.config.expected_spec(), timeout=1.0, stop=self._stop)
             except StreamNotFoundError:
                 continue
             self.stats.connected = True
@@ -413,12 +443,19 @@ class PhysioReceiver:
             return
 
     def _on_overflow(self, gap: Gap) -> None:
+        """Log overflows, at most one line per policy every 5 s (every gap is kept in the stats)."""
         if gap.count:
-            self.log.warning(
-                f"buffer overflow: dropped {gap.count} oldest sample(s) t={gap.first_t:.4f}..{gap.last_t:.4f}"
+            self._overflows.report(
+                "dropped",
+                f"buffer overflow: dropped {gap.count} oldest sample(s) "
+                f"t={gap.first_t:.4f}..{gap.last_t:.4f}",
+                "sample(s) dropped",
+                count=gap.count,
             )
         else:
-            self.log.warning("buffer full: producer waits for the consumer (raise buffer_length?)")
+            self._overflows.report(
+                "blocked", "buffer full: producer waits for the consumer (raise buffer_length?)", "wait(s)"
+            )
 
     # -- consumer ------------------------------------------------------------
     def _consume(self) -> None:

@@ -33,7 +33,7 @@ from hri_physio_bridge.nodes.common import (
     split_ros_args,
 )
 from hri_physio_bridge.receiver import ConfigError, PhysioReceiver, ReceiverConfig
-from hri_physio_bridge.streamers import StreamerError, create_streamer
+from hri_physio_bridge.streamers import OpenCancelled, StreamerError, create_streamer
 
 PROG = "physio_receiver"
 _HELP = {
@@ -121,7 +121,7 @@ class PhysioReceiverNode(Node):
         return self.receiver
 
     def publish_status(self) -> dict[str, Any]:
-        status = self.receiver.stats.as_dict() if self.receiver else {}
+        status = self.receiver.status() if self.receiver else {}
         status["t"] = time.time()
         status["node"] = self.get_fully_qualified_name()
         self.status_pub.publish(String(data=json.dumps(status)))
@@ -136,7 +136,7 @@ def _console(receiver: PhysioReceiver, stop: threading.Event, stream: Any = sys.
             stop.set()
             return
         if cmd == "status":
-            print(json.dumps(receiver.stats.as_dict()), flush=True)
+            print(json.dumps(receiver.status()), flush=True)
         elif cmd == "pause":
             receiver.pause()
         elif cmd == "resume":
@@ -174,12 +174,20 @@ def main(argv: list[str] | None = None) -> int:
         except (ConfigError, ValueError, StreamerError) as exc:
             fail(PROG, str(exc))
         log = node.get_logger()
-        stop = install_stop_handlers(lambda name: log.info(f"{name} received: flushing and exiting"))
+
+        def on_stop(name: str) -> None:
+            log.info(f"{name} received: flushing and exiting")
+            receiver.request_stop()  # ends the waits for the input and for a consumer too
+
+        stop = install_stop_handlers(on_stop)
         executor.add_node(node)
         spin = threading.Thread(target=_spin, args=(executor,), name="ros-spin")
         spin.start()
         try:
             receiver.open()
+        except OpenCancelled:
+            log.info(f"stopped before the input {receiver.source.uri} appeared")
+            return 0
         except StreamerError as exc:
             log.error(str(exc))
             return 1
@@ -195,7 +203,8 @@ def main(argv: list[str] | None = None) -> int:
                 log.info(
                     f"received {status['received_samples']} samples, published "
                     f"{status['published_samples']} in {status['published_frames']} frames, "
-                    f"gaps {status['gaps']}, NaN/inf {status['nonfinite_samples']}"
+                    f"gaps {status['gaps']}, NaN/inf {status['nonfinite_samples']}, "
+                    f"rejected {status['rejected_messages'] + status['rejected_chunks']}"
                 )
                 next_status += args.status_period
         receiver.stop()

@@ -1,6 +1,7 @@
 """Streamers: one interface, several transports, chosen by URI (see factory)."""
 
 from hri_physio_bridge.streamers.base import (
+    OpenCancelled,
     Streamer,
     StreamerError,
     StreamLostError,
@@ -13,6 +14,7 @@ from hri_physio_bridge.streamers.base import (
 from hri_physio_bridge.streamers.factory import create_streamer, register, split_uri
 
 __all__ = [
+    "OpenCancelled",
     "StreamLostError",
     "StreamMismatchError",
     "StreamNotFoundError",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import abc
+import threading
 from dataclasses import dataclass, field
 from urllib.parse import parse_qs
 
@@ -17,6 +18,10 @@ class StreamerError(RuntimeError):
 
 class StreamNotFoundError(StreamerError):
     """The input stream did not appear within the timeout."""
+
+
+class OpenCancelled(StreamNotFoundError):
+    """A stop was requested while waiting for the input to appear."""
 
 
 class StreamLostError(StreamerError):
@@ -114,14 +119,25 @@ class Streamer(abc.ABC):
     def __init__(self, address: str) -> None:
         self.address = address
         self.spec: StreamSpec | None = None
+        #: Input messages that arrived but could not be used (malformed, wrong shape); counted, not fatal.
+        self.bad_messages = 0
 
     @property
     def uri(self) -> str:
         return f"{self.scheme}:{self.address}"
 
     @abc.abstractmethod
-    def open_input(self, expected: StreamSpec | None = None, timeout: float = 10.0) -> StreamSpec:
-        """Connect to the source; return what it is. Raise StreamNotFoundError/StreamMismatchError."""
+    def open_input(
+        self,
+        expected: StreamSpec | None = None,
+        timeout: float = 10.0,
+        stop: threading.Event | None = None,
+    ) -> StreamSpec:
+        """Connect to the source; return what it is. Raise StreamNotFoundError/StreamMismatchError.
+
+        A transport that waits for its source gives up promptly with OpenCancelled once ``stop``
+        is set (Ctrl-C during a long ``timeout``).
+        """
 
     @abc.abstractmethod
     def open_output(self, spec: StreamSpec) -> None:

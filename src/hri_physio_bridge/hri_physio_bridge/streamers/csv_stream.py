@@ -15,6 +15,7 @@ import csv
 import io
 import math
 import os
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -114,7 +115,13 @@ class CsvStreamer(Streamer):
         self.exhausted = False
 
     # -- input ---------------------------------------------------------------
-    def open_input(self, expected: StreamSpec | None = None, timeout: float = 10.0) -> StreamSpec:
+    def open_input(
+        self,
+        expected: StreamSpec | None = None,
+        timeout: float = 10.0,
+        stop: threading.Event | None = None,
+    ) -> StreamSpec:
+        # The file is there or not: nothing to wait for, so neither timeout nor stop applies.
         self.close()
         if not self.path.is_file():
             raise StreamNotFoundError(f"CSV file {self.path} does not exist")

@@ -10,6 +10,7 @@ we keep them unchanged).
 
 from __future__ import annotations
 
+import threading
 import time
 
 import numpy as np
@@ -17,6 +18,7 @@ import pylsl
 
 from hri_physio_bridge.frames import Frame
 from hri_physio_bridge.streamers.base import (
+    OpenCancelled,
     Streamer,
     StreamerError,
     StreamLostError,
@@ -39,6 +41,8 @@ _TO_LSL = {
 }
 _FROM_LSL = {v: k for k, v in _TO_LSL.items()}
 _QUERY_KEYS = {"type", "source_id", "sync"}
+#: Seconds between two looks at the resolver's results while waiting for an input stream.
+RESOLVE_POLL = 0.05
 
 
 def parse_lsl_address(address: str) -> tuple[str, dict[str, str]]:
@@ -98,17 +102,40 @@ class LslStreamer(Streamer):
             parts.append(f"source_id={quote(self.params['source_id'])}")
         return " and ".join(parts)
 
-    def open_input(self, expected: StreamSpec | None = None, timeout: float = 10.0) -> StreamSpec:
+    def _resolve(self, timeout: float, stop: threading.Event | None) -> pylsl.StreamInfo:
+        """Wait up to ``timeout`` for the stream; give up promptly once ``stop`` is set.
+
+        A continuous resolver is polled rather than one blocking resolve: the main thread
+        stays in Python, so a signal handler (Ctrl-C) runs at once. (Short blocking resolves
+        are no substitute: with liblsl 1.18 a 0.5 s resolve_bypred sometimes takes 5.5 s.)
+        """
+        deadline = time.monotonic() + timeout
+        resolver = pylsl.ContinuousResolver(pred=self._predicate())
+        while True:
+            if stop is not None and stop.is_set():
+                raise OpenCancelled(f"stopped while waiting for LSL stream {self._predicate()}")
+            infos = resolver.results()
+            if infos:
+                return infos[0]
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                break
+            time.sleep(min(RESOLVE_POLL, remaining))
+        del resolver
+        seen = pylsl.resolve_streams(wait_time=min(1.0, max(timeout, 0.2)))
+        listing = "; ".join(describe_stream(i) for i in seen) or "none"
+        raise StreamNotFoundError(
+            f"LSL stream {self._predicate()} did not appear within {timeout:g} s. Streams seen: {listing}"
+        )
+
+    def open_input(
+        self,
+        expected: StreamSpec | None = None,
+        timeout: float = 10.0,
+        stop: threading.Event | None = None,
+    ) -> StreamSpec:
         self.close()
-        infos = pylsl.resolve_bypred(self._predicate(), 1, timeout)
-        if not infos:
-            seen = pylsl.resolve_streams(wait_time=min(1.0, max(timeout, 0.2)))
-            listing = "; ".join(describe_stream(i) for i in seen) or "none"
-            raise StreamNotFoundError(
-                f"LSL stream {self._predicate()} did not appear within {timeout:g} s. "
-                f"Streams seen: {listing}"
-            )
-        info = infos[0]
+        info = self._resolve(timeout, stop)
         spec = _spec_from_info(info)
         if expected is not None:
             check_matches(spec, expected, self.uri)
@@ -210,13 +237,24 @@ def check_matches(actual: StreamSpec, expected: StreamSpec, where: str) -> None:
 
 def cast_for_output(values: np.ndarray, dtype: np.dtype, where: str) -> np.ndarray:
     """Cast to an integer/float output format, refusing values it cannot hold."""
-    if dtype.kind == "i":
-        if not np.all(np.isfinite(values)):
-            raise StreamMismatchError(f"{where}: NaN/inf cannot be sent on an integer ({dtype}) stream")
-        info = np.iinfo(dtype)
+    if dtype.kind != "i":
+        return values.astype(dtype, copy=False)
+    info = np.iinfo(dtype)
+
+    def out_of_range() -> StreamMismatchError:
+        return StreamMismatchError(
+            f"{where}: values outside [{info.min}, {info.max}] cannot be sent as {dtype}"
+        )
+
+    if values.dtype.kind in "iu":
+        # Integers cast exactly: no detour through float64, which rounds int64 beyond 2**53.
         if values.size and (values.min() < info.min or values.max() > info.max):
-            raise StreamMismatchError(
-                f"{where}: values outside [{info.min}, {info.max}] cannot be sent as {dtype}"
-            )
-        return np.rint(values).astype(dtype)
-    return values.astype(dtype, copy=False)
+            raise out_of_range()
+        return values.astype(dtype, copy=False)
+    if not np.all(np.isfinite(values)):
+        raise StreamMismatchError(f"{where}: NaN/inf cannot be sent on an integer ({dtype}) stream")
+    rounded = np.rint(values)
+    limit = 2.0 ** (info.bits - 1)  # [-limit, limit) holds the type, compared exactly as floats
+    if rounded.size and (rounded.min() < -limit or rounded.max() >= limit):
+        raise out_of_range()
+    return rounded.astype(dtype)

@@ -8,6 +8,7 @@ publishers are reliable with a deep queue so bursts are not dropped.
 from __future__ import annotations
 
 import queue
+import threading
 from collections.abc import Callable
 
 import numpy as np
@@ -24,6 +25,7 @@ from hri_physio_bridge.frames import (
     msg_to_marker,
     string_frame_to_msgs,
 )
+from hri_physio_bridge.rate_limit import RateLimitedLog
 from hri_physio_bridge.streamers.base import (
     Streamer,
     StreamerError,
@@ -61,11 +63,17 @@ class RosStreamer(Streamer):
         self._sub = None
         self._pub = None
         self._expected: StreamSpec | None = None
-        self._on_bad = on_bad_message or (lambda text: node.get_logger().error(text))
-        self.bad_messages = 0
+        # Every bad message is counted; at most one line per kind of problem every 5 s is logged.
+        self._bad_log = RateLimitedLog(on_bad_message or (lambda text: node.get_logger().error(text)))
 
     # -- input ---------------------------------------------------------------
-    def open_input(self, expected: StreamSpec | None = None, timeout: float = 10.0) -> StreamSpec:
+    def open_input(
+        self,
+        expected: StreamSpec | None = None,
+        timeout: float = 10.0,
+        stop: threading.Event | None = None,
+    ) -> StreamSpec:
+        # A subscription needs no publisher to exist: nothing to wait for (timeout, stop unused).
         self.close()
         spec = expected or StreamSpec(name=self.topic)
         self._expected = spec
@@ -78,26 +86,27 @@ class RosStreamer(Streamer):
         self.spec = spec
         return spec
 
-    def _reject(self, why: str) -> None:
+    def _reject(self, kind: str, why: str) -> None:
+        """Count a message that cannot be used; log it, rate-limited per ``kind`` of problem."""
         self.bad_messages += 1
-        self._on_bad(f"{self.topic}: message rejected ({self.bad_messages} so far): {why}")
+        self._bad_log.report(kind, f"{self.topic}: message rejected: {why}", "message(s) rejected")
 
     def _on_frame(self, msg: Float64MultiArray) -> None:
         try:
             frame = msg_to_frame(msg)
         except FrameFormatError as exc:
-            self._reject(str(exc))
+            self._reject("layout", f"malformed frame layout: {exc}")
             return
         spec = self._expected
         if spec is not None and frame.num_channels != spec.channel_count:
             self._reject(
-                f"frame has {frame.num_channels} channel(s), num_channels is {spec.channel_count}"
+                "channels", f"frame has {frame.num_channels} channel(s), num_channels is {spec.channel_count}"
             )
             return
         if self._np_dtype.kind == "i":
             values = frame.values
             if not np.all(np.isfinite(values)) or np.any(values != np.rint(values)):
-                self._reject(f"non-integer values on a {spec.dtype} stream")
+                self._reject("non-integer", f"non-integer values on a {spec.dtype} stream")
                 return
             frame = Frame(frame.timestamps, values.astype(self._np_dtype), frame.channels)
         self._queue.put(frame)
@@ -106,7 +115,7 @@ class RosStreamer(Streamer):
         try:
             t, data = msg_to_marker(msg)
         except FrameFormatError as exc:
-            self._reject(str(exc))
+            self._reject("marker", str(exc))
             return
         self._queue.put(Frame(np.array([t]), np.array([[data]], dtype=object), self.spec.channels))
 

@@ -19,6 +19,7 @@ from std_msgs.msg import String
 from hri_physio_bridge.frames import Frame
 from hri_physio_bridge.nodes.common import logic_logger
 from hri_physio_bridge.streamers import (
+    OpenCancelled,
     Streamer,
     StreamerError,
     StreamLostError,
@@ -109,7 +110,9 @@ class ProcessorRunner:
             )
         while not stop.is_set():
             try:
-                spec = self.source.open_input(expected, timeout=cfg.resolve_timeout)
+                spec = self.source.open_input(expected, timeout=cfg.resolve_timeout, stop=stop)
+            except OpenCancelled:
+                return False
             except StreamNotFoundError as exc:
                 self.node.log.warning(f"{exc}; still waiting")
                 continue
