@@ -21,6 +21,9 @@ while a publisher in this process sends pre-serialized messages (reliable, depth
     msg/s (same bytes, so about the same ratio in MB/s), goal >= 0.8. Our ``BagWriter`` alone is
     shown for information. When the recorder took every message sent, the publisher was the
     bottleneck and the recorder's true ceiling is higher than measured (the line says so).
+(c) flat out again with the least a Python recorder can do (bench/minimal_recorder.py: one raw
+    rclpy subscription -> rosbags Writer): how much of (b)'s gap is receiving through rclpy,
+    and the recorder's own overhead over that baseline.
 
 Run:  source scripts/env.sh; python bench/bench_recorder.py [--quick] [--only frames|strings]
 (default about 1 minute per stream; --quick about half of that).
@@ -129,9 +132,10 @@ def _peak_rss_mb(proc: psutil.Process) -> float:
 
 
 def run_recorder(
-    stream: Stream, payloads: list[bytes], seconds: float, burst: bool, workdir: Path
+    stream: Stream, payloads: list[bytes], seconds: float, burst: bool, workdir: Path, minimal: bool = False
 ) -> tuple[RecorderResult, Path]:
-    """Record ``stream`` published for ``seconds`` (at its rate, or as fast as possible)."""
+    """Record ``stream`` published for ``seconds`` (at its rate, or as fast as possible), with
+    the recorder node or (``minimal``) the baseline of bench/minimal_recorder.py."""
     import rclpy
     from rclpy.node import Node
     from rclpy.qos import QoSProfile
@@ -139,20 +143,18 @@ def run_recorder(
     from std_msgs.msg import Float64MultiArray, String
 
     topic = f"/bench_{uuid.uuid4().hex[:6]}/{stream.name}"
-    bag = workdir / f"{stream.name}{'_burst' if burst else ''}"
+    bag = workdir / f"{stream.name}{'_burst' if burst else ''}{'_minimal' if minimal else ''}"
     log_path = workdir / f"{bag.name}.log"  # a file, not a pipe: nothing blocks on a full pipe
     log_file = log_path.open("w")
+    status_period = "0.25" if burst else "2"
+    if minimal:
+        argv = [sys.executable, str(Path(__file__).with_name("minimal_recorder.py")), topic, stream.msg_type,
+                str(bag), status_period]
+    else:
+        argv = [str(Path(sys.prefix) / "bin" / "recorder"), topic, "-o", str(bag),
+                "--discovery-period", "0.2", "--status-period", status_period]
     rec = subprocess.Popen(
-        [
-            str(Path(sys.prefix) / "bin" / "recorder"),
-            topic,
-            "-o",
-            str(bag),
-            "--discovery-period",
-            "0.2",
-            "--status-period",
-            "0.25" if burst else "2",
-        ],
+        argv,
         stdout=subprocess.DEVNULL,
         stderr=log_file,
         env=dict(os.environ),
@@ -280,6 +282,14 @@ def bench_stream(s: Stream, frame: int, seconds: float, burst_seconds: float, wo
     print(f"    rosbags Writer alone, the same messages: {rb_rate:.0f} msg/s, {rb_mbps:.2f} MB/s")
     print(f"    BagWriter alone (for information):       {bw_rate:.0f} msg/s, {bw_mbps:.2f} MB/s")
     print(f"    ratio recorder / rosbags Writer alone: {ratio:.2f} -> goal >= {GOAL} {verdict}", flush=True)
+    minimal, _ = run_recorder(s, payloads, burst_seconds, True, work, minimal=True)
+    print(
+        f"(c) flat out, minimal rclpy recorder (raw subscription -> rosbags Writer): "
+        f"{minimal.rate:.0f} msg/s, CPU {minimal.cpu_percent:.0f}%\n"
+        f"    ratio minimal / rosbags Writer alone: {minimal.rate / rb_rate:.2f} (what receiving through "
+        f"rclpy leaves); recorder / minimal: {burst.rate / minimal.rate:.2f}",
+        flush=True,
+    )
     return (
         s.name,
         f"{res.lost}",
@@ -289,6 +299,7 @@ def bench_stream(s: Stream, frame: int, seconds: float, burst_seconds: float, wo
         f"{burst.mbps:.1f}",
         f"{rb_rate:.0f}",
         f"{ratio:.2f} {verdict}",
+        f"{burst.rate / minimal.rate:.2f}",
     )
 
 
@@ -322,6 +333,7 @@ def main() -> int:
         "MB/s",
         "rosbags msg/s",
         f"ratio, goal >= {GOAL}",
+        "recorder/minimal",
     )
     widths = [max(len(r[i]) for r in (head, *rows)) for i in range(len(head))]
     print("\nsummary")
