@@ -228,6 +228,9 @@ def run(kind: str, channels: int, rate: float, frame: int, chunk: int, seconds: 
         sub.close()
 
 
+BURST_REPEATS = 5
+
+
 def ms(x: float) -> str:
     return f"{x * 1e3:7.2f} ms"
 
@@ -255,16 +258,22 @@ def throughput_section(seconds: float) -> None:
           f"{'peakRSS':>8}")
     for burst in (False, True):
         mode = "burst" if burst else "realtime"
-        res = {}
-        for kind in ("relay", "receiver"):
-            r = run(kind, 64, 1000.0, 100, 10 if not burst else 1000, seconds, burst=burst)
-            res[kind] = r
-            print(f"{mode:>9} {kind:>9} {r.samples:>8} {r.lost:>5} {r.duplicated:>4} {r.rate:>10.0f} "
-                  f"{r.cpu:>6.1f} {r.peak_rss:>6.1f}MB")
-        ratio = res["receiver"].rate / res["relay"].rate
-        print(f"{mode:>9} receiver/relay sustained-rate ratio: {ratio:.3f} (goal >= 0.9: "
-              f"{'MET' if ratio >= 0.9 else 'NOT MET'}); receiver lost {res['receiver'].lost}, "
-              f"duplicated {res['receiver'].duplicated}")
+        rates: dict[str, list[float]] = {"relay": [], "receiver": []}
+        lost = dup = 0
+        # A burst shares 2 cores between the pusher, the forwarder and the subscriber, so one
+        # run is noisy: alternate the two BURST_REPEATS times and compare the medians.
+        for _ in range(BURST_REPEATS if burst else 1):
+            for kind in ("relay", "receiver"):
+                r = run(kind, 64, 1000.0, 100, 10 if not burst else 1000, seconds, burst=burst)
+                rates[kind].append(r.rate)
+                if kind == "receiver":
+                    lost, dup = lost + r.lost, dup + r.duplicated
+                print(f"{mode:>9} {kind:>9} {r.samples:>8} {r.lost:>5} {r.duplicated:>4} {r.rate:>10.0f} "
+                      f"{r.cpu:>6.1f} {r.peak_rss:>6.1f}MB")
+        ratio = float(np.median(rates["receiver"]) / np.median(rates["relay"]))
+        runs = f"median of {len(rates['relay'])} runs each" if burst else "one run each"
+        print(f"{mode:>9} receiver/relay sustained-rate ratio: {ratio:.3f} ({runs}; goal >= 0.9: "
+              f"{'MET' if ratio >= 0.9 else 'NOT MET'}); receiver lost {lost}, duplicated {dup}")
 
 
 def main() -> None:
