@@ -14,7 +14,7 @@ import time
 from collections import Counter
 from collections.abc import Callable
 
-#: Seconds between two lines of the same kind (the receiver's NaN warning uses the same).
+#: Seconds between two lines of the same kind.
 DEFAULT_PERIOD = 5.0
 
 

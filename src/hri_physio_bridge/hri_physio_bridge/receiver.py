@@ -202,10 +202,10 @@ class PhysioReceiver:
         self._fatal: BaseException | None = None
         self._finished = threading.Event()
         self._lock = threading.Lock()
-        self._last_nonfinite_warning = -math.inf
-        # Rejected chunks and overflows can repeat many times a second: one line per kind every 5 s.
+        # Rejected chunks, overflows and NaN/inf can repeat many times a second: one line per kind
+        # every 5 s, each counted.
         self._rejections = RateLimitedLog(lambda text: self.log.error(text), monotonic=monotonic)
-        self._overflows = RateLimitedLog(lambda text: self.log.warning(text), monotonic=monotonic)
+        self._warnings = RateLimitedLog(lambda text: self.log.warning(text), monotonic=monotonic)
 
     # -- lifecycle -----------------------------------------------------------
     def open(self) -> StreamSpec:
@@ -402,13 +402,13 @@ class PhysioReceiver:
         if bad.any():
             count = int(bad.any(axis=1).sum())
             self.stats.nonfinite_samples += count
-            now = self._monotonic()
-            if now - self._last_nonfinite_warning > 5.0:
-                self._last_nonfinite_warning = now
-                self.log.warning(
-                    f"{self.source.uri}: {count} sample(s) with NaN/inf near t={chunk.timestamps[0]:.3f} "
-                    f"(forwarded unchanged; {self.stats.nonfinite_samples} so far)"
-                )
+            self._warnings.report(
+                "nonfinite",
+                f"{self.source.uri}: {count} sample(s) with NaN/inf near t={chunk.timestamps[0]:.3f} "
+                "(forwarded unchanged)",
+                "sample(s) with NaN/inf",
+                count=count,
+            )
 
     def _check_continuity(self, chunk: Frame) -> None:
         """Report missing samples when the timestamps jump by more than 1.5 periods."""
@@ -445,7 +445,7 @@ class PhysioReceiver:
     def _on_overflow(self, gap: Gap) -> None:
         """Log overflows, at most one line per policy every 5 s (every gap is kept in the stats)."""
         if gap.count:
-            self._overflows.report(
+            self._warnings.report(
                 "dropped",
                 f"buffer overflow: dropped {gap.count} oldest sample(s) "
                 f"t={gap.first_t:.4f}..{gap.last_t:.4f}",
@@ -453,7 +453,7 @@ class PhysioReceiver:
                 count=gap.count,
             )
         else:
-            self._overflows.report(
+            self._warnings.report(
                 "blocked", "buffer full: producer waits for the consumer (raise buffer_length?)", "wait(s)"
             )
 

@@ -23,86 +23,24 @@ import argparse
 import contextlib
 import json
 import math
-import re
 import sys
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 
 from hri_physio_bridge.launcher import ProcessGroup
 from hri_physio_bridge.nodes.common import install_stop_handlers
 from hri_physio_bridge.ros_tools import BackgroundNode, clock_message
+from hri_physio_coach.session_view import CLOCK_STEP, SessionView, SimClock, summary
 
 HR_TOPIC = "/physio/polar_h10/hr"
 ECG_TOPIC = "/physio/polar_h10/ecg"
 ECG_HR_TOPIC = "/physio/polar_h10/ecg/hr"
-#: Sim seconds per /clock message: no larger than any sim-time node's timer period
-#: (coach tick, participant update and the mock's joint states below), or timers skip periods.
-CLOCK_STEP = 0.1
-EXERCISE_PHASES = ("warm_up", "conditioning", "cool_down")
 #: Valid HR samples a rule update needs when the coach listens to the processor's HR.
 ECG_HR_MIN_SAMPLES = 3
 #: Seconds without HR before the coach pauses adaptation, on the processor's HR (4 hops).
 ECG_HR_TIMEOUT = 20.0
-
-
-@dataclass
-class SessionView:
-    """What the launcher has seen of the session, from the ROS 2 topics."""
-
-    state: dict = field(default_factory=dict)
-    hr: float = math.nan
-    hr_seen: int = 0  # on the coach's HR topic, since launch
-    hr_samples: int = 0  # on the coach's HR topic, between session start and end
-    strap_samples: int = 0  # on the strap's HR topic: proves the LSL -> ROS 2 path at start-up
-    model_hr: float = math.nan
-    zone: tuple[float, float] | None = None
-    events: dict[str, int] = field(default_factory=dict)
-    adaptations: int = 0
-    gated: dict[str, int] = field(default_factory=dict)  # rule updates that could not run, by reason
-    exercise_hr: int = 0
-    exercise_in_zone: int = 0
-    robot_actions: int = 0
-    started_at: float | None = None  # sim time of the coach's session_start / session_end
-    ended_at: float | None = None
-
-    def on_event(self, event: dict) -> None:
-        kind = str(event.get("event"))
-        self.events[kind] = self.events.get(kind, 0) + 1
-        if kind == "session_start":
-            self.started_at = float(event["t"])
-        elif kind == "session_end":
-            self.ended_at = float(event["t"])
-        elif kind == "zone":
-            self.zone = (float(event["low"]), float(event["high"]))
-        elif kind == "rule_update":
-            decision = event.get("decision", {})
-            self.adaptations += int(bool(decision.get("changed")))
-            if decision.get("action") == "gated":
-                reason = re.sub(r"\d+(\.\d+)?", "N", str(decision.get("reason")))  # one line per kind
-                self.gated[reason] = self.gated.get(reason, 0) + 1
-
-    def on_hr(self, bpm: float) -> None:
-        self.hr = bpm
-        self.hr_seen += 1
-        if self.started_at is not None and self.ended_at is None:
-            self.hr_samples += 1
-        if self.zone is not None and self.state.get("phase_kind") in EXERCISE_PHASES:
-            self.exercise_hr += 1
-            self.exercise_in_zone += int(self.zone[0] <= bpm <= self.zone[1])
-
-    def progress(self, now: float) -> str:
-        t0 = self.started_at
-        elapsed = "--:--" if t0 is None else f"{int(now - t0) // 60:02d}:{int(now - t0) % 60:02d}"
-        where = "ended" if self.ended_at is not None else (
-            f"{self.state.get('phase') or 'waiting'}/{self.state.get('activity') or '-'}")
-        zone = f"{self.zone[0]:.0f}-{self.zone[1]:.0f}" if self.zone else "not yet"
-        speed = self.state.get("ladder_speed")
-        pace = f"speed {speed:.2f} tempo {self.state.get('ladder_tempo')}" if speed is not None else "pace -"
-        return (f"[session] {elapsed} {where:32s} HR {self.hr:5.1f} bpm (model {self.model_hr:5.1f})  "
-                f"zone {zone}  {pace}  adaptations {self.adaptations}  robot actions {self.robot_actions}")
 
 
 class ClockAndWatcher(BackgroundNode):
@@ -173,25 +111,6 @@ class ClockAndWatcher(BackgroundNode):
 
     def count_subscribers(self, topic: str) -> int:
         return self.node.count_subscribers(topic)
-
-
-class SimClock:
-    """Sim time advancing at ``speed`` x wall time, in steps of CLOCK_STEP sim seconds."""
-
-    def __init__(self, start: float, speed: float) -> None:
-        self.t = start
-        self.speed = speed
-        self._base = start
-        self._wall = time.monotonic()
-
-    def due_steps(self) -> list[float]:
-        """The clock values to publish now, to keep up with the wall clock."""
-        target = self._base + (time.monotonic() - self._wall) * self.speed
-        steps = []
-        while self.t + CLOCK_STEP <= target:
-            self.t += CLOCK_STEP
-            steps.append(self.t)
-        return steps
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -310,24 +229,6 @@ def wait_for_system(watcher: ClockAndWatcher, group: ProcessGroup, clock: SimClo
                     f"{watcher.count_subscribers('/QtController/input')})")
         time.sleep(0.02)
     return "interrupted during start-up"
-
-
-def summary(view: SessionView, wall: float, bag: str | None) -> str:
-    t0, t1 = view.started_at, view.ended_at
-    sim = (t1 - t0) if t0 is not None and t1 is not None else 0.0
-    in_zone = (f"{100.0 * view.exercise_in_zone / view.exercise_hr:.0f} % of {view.exercise_hr} exercise HR "
-               f"samples in the zone" if view.exercise_hr else "no exercise HR samples")
-    zone = f"{view.zone[0]:.1f}-{view.zone[1]:.1f} bpm" if view.zone else "never set"
-    factor = sim / wall if wall else 0.0
-    updates, behaviours = view.events.get("rule_update", 0), view.events.get("behaviour", 0)
-    return "\n".join([
-        f"[session] done: {sim / 60:.1f} min of session in {wall:.0f} s wall ({factor:.0f}x)",
-        f"[session] zone {zone}; {in_zone}; {view.adaptations} adaptations in {updates} rule updates; "
-        f"{behaviours} behaviours; {view.robot_actions} robot actions",
-        *(f"[session] {n} rule update(s) gated: {reason}" for reason, n in sorted(view.gated.items())),
-        f"[session] heart-rate samples on the coach's input during the session: {view.hr_samples}"
-        + (f"; recorded to {bag}" if bag else ""),
-    ])
 
 
 def main(argv: list[str] | None = None) -> int:
