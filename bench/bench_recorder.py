@@ -24,6 +24,10 @@ while a publisher in this process sends pre-serialized messages (reliable, depth
 (c) flat out again with the least a Python recorder can do (bench/minimal_recorder.py: one raw
     rclpy subscription -> rosbags Writer): how much of (b)'s gap is receiving through rclpy,
     and the recorder's own overhead over that baseline.
+(d) the ceilings of this machine: the rclpy publisher's flat-out send rate, and a receiver that
+    takes the raw messages as the recorder does but writes nothing (minimal_recorder.py
+    take-only). No rclpy recorder can beat the lower of the two; it is printed as a ratio of
+    the Writer alone, with the recorder's share of it.
 
 Run:  source scripts/env.sh; python bench/bench_recorder.py [--quick] [--only frames|strings]
 (default about 1 minute per stream; --quick about half of that).
@@ -106,6 +110,7 @@ class RecorderResult:
     cpu_percent: float
     peak_rss_mb: float
     busy_messages: int = 0  # flat out: written in the busy period (recorded: all of them)
+    sent_rate: float = 0.0  # messages/s the publisher managed
 
     @property
     def lost(self) -> int:
@@ -132,10 +137,16 @@ def _peak_rss_mb(proc: psutil.Process) -> float:
 
 
 def run_recorder(
-    stream: Stream, payloads: list[bytes], seconds: float, burst: bool, workdir: Path, minimal: bool = False
+    stream: Stream,
+    payloads: list[bytes],
+    seconds: float,
+    burst: bool,
+    workdir: Path,
+    baseline: str | None = None,
 ) -> tuple[RecorderResult, Path]:
     """Record ``stream`` published for ``seconds`` (at its rate, or as fast as possible), with
-    the recorder node or (``minimal``) the baseline of bench/minimal_recorder.py."""
+    the recorder node or a baseline of bench/minimal_recorder.py (``baseline`` "write" or
+    "take-only": then nothing is recorded and only the progress reports count)."""
     import rclpy
     from rclpy.node import Node
     from rclpy.qos import QoSProfile
@@ -143,13 +154,13 @@ def run_recorder(
     from std_msgs.msg import Float64MultiArray, String
 
     topic = f"/bench_{uuid.uuid4().hex[:6]}/{stream.name}"
-    bag = workdir / f"{stream.name}{'_burst' if burst else ''}{'_minimal' if minimal else ''}"
+    bag = workdir / f"{stream.name}{'_burst' if burst else ''}{'_' + baseline if baseline else ''}"
     log_path = workdir / f"{bag.name}.log"  # a file, not a pipe: nothing blocks on a full pipe
     log_file = log_path.open("w")
     status_period = "0.25" if burst else "2"
-    if minimal:
+    if baseline:
         argv = [sys.executable, str(Path(__file__).with_name("minimal_recorder.py")), topic, stream.msg_type,
-                str(bag), status_period]
+                str(bag), status_period, baseline]
     else:
         argv = [str(Path(sys.prefix) / "bin" / "recorder"), topic, "-o", str(bag),
                 "--discovery-period", "0.2", "--status-period", status_period]
@@ -213,9 +224,11 @@ def run_recorder(
         recorded += 1
         payload += len(m.data)
     if not burst:
-        return RecorderResult(sent, recorded, elapsed, payload, cpu, rss), bag
+        return RecorderResult(sent, recorded, elapsed, payload, cpu, rss, sent_rate=sent / elapsed), bag
     busy_n, busy_mb, busy_s = busy_throughput(err)
-    return RecorderResult(sent, recorded, busy_s, round(busy_mb * 1e6), cpu, rss, busy_n), bag
+    return RecorderResult(
+        sent, recorded, busy_s, round(busy_mb * 1e6), cpu, rss, busy_n, sent_rate=sent / elapsed
+    ), bag
 
 
 def writer_alone(bag: Path, workdir: Path, which: str) -> tuple[float, float]:
@@ -282,12 +295,23 @@ def bench_stream(s: Stream, frame: int, seconds: float, burst_seconds: float, wo
     print(f"    rosbags Writer alone, the same messages: {rb_rate:.0f} msg/s, {rb_mbps:.2f} MB/s")
     print(f"    BagWriter alone (for information):       {bw_rate:.0f} msg/s, {bw_mbps:.2f} MB/s")
     print(f"    ratio recorder / rosbags Writer alone: {ratio:.2f} -> goal >= {GOAL} {verdict}", flush=True)
-    minimal, _ = run_recorder(s, payloads, burst_seconds, True, work, minimal=True)
+    minimal, _ = run_recorder(s, payloads, burst_seconds, True, work, baseline="write")
     print(
         f"(c) flat out, minimal rclpy recorder (raw subscription -> rosbags Writer): "
         f"{minimal.rate:.0f} msg/s, CPU {minimal.cpu_percent:.0f}%\n"
         f"    ratio minimal / rosbags Writer alone: {minimal.rate / rb_rate:.2f} (what receiving through "
         f"rclpy leaves); recorder / minimal: {burst.rate / minimal.rate:.2f}",
+        flush=True,
+    )
+    take, _ = run_recorder(s, payloads, burst_seconds, True, work, baseline="take-only")
+    sender = max(burst.sent_rate, minimal.sent_rate, take.sent_rate)
+    ceiling = min(take.rate, sender) / rb_rate
+    print(
+        f"(d) ceilings here, flat out: the rclpy publisher sends at most {sender:.0f} msg/s "
+        f"({sender / rb_rate:.2f} of the Writer alone); taking the raw messages and writing nothing "
+        f"receives {take.rate:.0f} msg/s ({take.rate / rb_rate:.2f}, CPU {take.cpu_percent:.0f}%).\n"
+        f"    No rclpy recorder can exceed {ceiling:.2f} of the Writer alone on this machine; "
+        f"the recorder reaches {burst.rate / min(take.rate, sender):.2f} of that ceiling.",
         flush=True,
     )
     return (
@@ -300,6 +324,8 @@ def bench_stream(s: Stream, frame: int, seconds: float, burst_seconds: float, wo
         f"{rb_rate:.0f}",
         f"{ratio:.2f} {verdict}",
         f"{burst.rate / minimal.rate:.2f}",
+        f"{ceiling:.2f}",
+        f"{burst.rate / min(take.rate, sender):.2f}",
     )
 
 
@@ -334,6 +360,8 @@ def main() -> int:
         "rosbags msg/s",
         f"ratio, goal >= {GOAL}",
         "recorder/minimal",
+        "ceiling ratio",
+        "recorder/ceiling",
     )
     widths = [max(len(r[i]) for r in (head, *rows)) for i in range(len(head))]
     print("\nsummary")

@@ -4,7 +4,11 @@ A baseline for bench_recorder.py (not part of the project): no graph polling, no
 (flushes), no repair, no metadata beyond what rosbags writes. It logs progress in the
 recorder's format so the benchmark measures both the same way.
 
-Usage: python bench/minimal_recorder.py TOPIC TYPE OUTPUT_DIR STATUS_PERIOD
+With ``take-only`` it writes nothing: it takes the raw messages straight from the
+subscription's handle in batches (the recorder's own receive path) and drops them. That is
+the ceiling of any rclpy recorder on this machine, whatever its writer.
+
+Usage: python bench/minimal_recorder.py TOPIC TYPE OUTPUT_DIR STATUS_PERIOD [write|take-only]
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ from pathlib import Path
 
 def main() -> int:
     topic, msgtype, out, period = sys.argv[1], sys.argv[2], Path(sys.argv[3]), float(sys.argv[4])
+    take_only = sys.argv[5:] == ["take-only"]
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSProfile
@@ -45,12 +50,20 @@ def main() -> int:
     rclpy.init(signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     node = rclpy.create_node("minimal_recorder")
     cls = String if msgtype.endswith("/String") else Float64MultiArray
-    node.create_subscription(cls, topic, on_msg, QoSProfile(depth=1000), raw=True)
+    depth = 10000 if take_only else 1000
+    sub = node.create_subscription(cls, topic, on_msg, QoSProfile(depth=depth), raw=True)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     next_status = time.monotonic() + period
     while not stop.is_set():
-        executor.spin_once(timeout_sec=0.01)
+        if take_only:
+            with sub.handle:
+                while (item := sub.handle.take_message(sub.msg_type, True)) is not None:
+                    counts[0] += 1
+                    counts[1] += len(item[0])
+            time.sleep(0.002)
+        else:
+            executor.spin_once(timeout_sec=0.01)
         if time.monotonic() >= next_status:
             next_status += period
             print(f"[INFO] [{time.time():.6f}] [recorder]: minimal; {counts[0]} messages, "

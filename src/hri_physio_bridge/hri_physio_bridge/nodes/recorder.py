@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Callable
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -27,6 +28,9 @@ from hri_physio_bridge.bag.writer import DEFAULT_CHUNK_SIZE, DEFAULT_FLUSH_PERIO
 from hri_physio_bridge.nodes.common import fail, install_stop_handlers, logic_logger, split_ros_args
 
 PROG = "recorder"
+DEFAULT_POLL_PERIOD = 0.01
+#: Messages taken per topic per pass before the executor runs timers again.
+DRAIN_BUDGET = 2000
 
 
 def _positive(text: str) -> float:
@@ -94,7 +98,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--compression", choices=("zstd", "none"), default="zstd", help="chunk compression (default zstd)"
     )
-    p.add_argument("--qos-depth", type=int, default=10000, help="subscription queue depth (default 10000)")
+    p.add_argument(
+        "--qos-depth",
+        type=int,
+        default=10000,
+        help="subscription queue depth (default 10000); must hold what a topic sends in one poll period",
+    )
+    p.add_argument(
+        "--poll-period",
+        type=_positive,
+        default=DEFAULT_POLL_PERIOD,
+        help=f"seconds between takes of the queued messages when idle (default {DEFAULT_POLL_PERIOD:g}); "
+        "receive stamps come from the middleware, so this only delays the disk",
+    )
     p.add_argument(
         "--repair",
         metavar="BAG",
@@ -139,6 +155,26 @@ def _qos_profile(values: dict[str, Any]) -> Any:
             else DurabilityPolicy.VOLATILE
         ),
     )
+
+
+def drain_subscriptions(
+    subs: dict[str, Any], on_message: Callable[[str, bytes, dict[str, Any]], None], budget: int = DRAIN_BUDGET
+) -> bool:
+    """Take the messages waiting in raw subscriptions ``{topic: subscription}`` straight from
+    their handles, without the executor's per-callback task machinery; True if a topic still
+    has more. At most ``budget`` per topic, so a flooding topic cannot starve the others.
+    Call it from the executor's thread: each topic's order is then kept."""
+    more = False
+    for topic, sub in list(subs.items()):
+        with sub.handle:
+            for _ in range(budget):
+                item = sub.handle.take_message(sub.msg_type, True)
+                if item is None:
+                    break
+                on_message(topic, item[0], item[1])
+            else:
+                more = True
+    return more
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -196,21 +232,6 @@ def _record(args: argparse.Namespace, ros_args: list[str], selector: TopicSelect
 
         return on_message
 
-    def drain(budget: int = 2000) -> int:
-        """Take waiting messages straight from the subscriptions, as the executor would but
-        without its per-callback task machinery (about twice the message rate in Python).
-        Same thread as the executor, so arrival order is kept."""
-        taken = 0
-        for topic, sub in list(subs.items()):
-            with sub.handle:
-                while taken < budget:
-                    item = sub.handle.take_message(sub.msg_type, True)
-                    if item is None:
-                        break
-                    session.on_message(topic, item[0], item[1])
-                    taken += 1
-        return taken
-
     def discover() -> None:
         for cand in session.candidates(node.get_topic_names_and_types()):
             infos = node.get_publishers_info_by_topic(cand.topic)
@@ -245,8 +266,12 @@ def _record(args: argparse.Namespace, ros_args: list[str], selector: TopicSelect
 
         node.create_timer(args.status_period, report)
         while not stop.is_set() and rclpy.ok():
-            # busy: keep draining (timers still run); idle: the executor waits for the next message
-            executor.spin_once(timeout_sec=0.0 if drain() else 0.1)
+            # Messages wait in the subscriptions' queues (stamped on arrival by the middleware)
+            # and are taken in batches every --poll-period: waking for each one would cost a
+            # whole executor pass per message. Timers and graph events run once per pass.
+            if not drain_subscriptions(subs, session.on_message):
+                stop.wait(args.poll_period)
+            executor.spin_once(timeout_sec=0.0)
     except (BagError, OSError) as exc:
         log.error(f"recording failed: {exc}")
         code = 1
