@@ -15,18 +15,16 @@ Generic over nodes and topics:
 
 A node's live output can be reproduced only if the bag holds every input message that node
 saw, and the node saw every one the bag holds. ROS 2 topics are volatile, and a publisher
-that waits for "a" subscriber (``physio_receiver --wait-for-consumers``) starts as soon as
-the first one is matched: when two processes listen to it (the recorder and the node under
-test), DDS discovery may match the second one later, and it misses the first frames (seen on
-a 2-core machine in 3 of 8 runs: the recorder or the node under test lost the first 3 to 14
-frames of 30). So:
+that waits for "a" subscriber starts as soon as the first one is matched: when two processes
+listen to it (the recorder and the node under test), DDS discovery may match the second one
+later, and it misses the first frames (seen on a 2-core machine in 3 of 8 runs: the recorder
+or the node under test lost the first 3 to 14 frames of 30). So:
 
-* a :class:`Relay` (in this process) forwards ``source`` to ``topic`` unchanged (raw bytes)
-  and holds every message until its publisher on ``topic`` has matched ``subscribers``
-  subscriptions (the recorder and the nodes under test). A reliable publisher delivers every
-  message published after a subscription was matched, so each of them receives the whole
-  stream, whatever the discovery timing. The upstream node publishes on ``source``, which
-  only the relay reads: its own wait for a consumer is then enough;
+* the upstream node must hold its stream until all of its readers are matched: for
+  ``physio_receiver``, ``--wait-for-consumers S --min-consumers N`` (N = the recorder + the
+  nodes under test). A reliable publisher delivers every message published after a
+  subscription was matched, so each of them receives the whole stream, whatever the
+  discovery timing;
 * ``NodeSpec.publishes``: after starting that node, the harness waits until the recorder
   records those topics before starting the next node (which may be the data source);
 * stopping waits ``stop_gap`` seconds between nodes, so a downstream node has taken the
@@ -36,9 +34,7 @@ frames of 30). So:
 from __future__ import annotations
 
 import signal
-import threading
 import time
-import uuid
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -57,86 +53,10 @@ class NodeSpec:
     publishes: tuple[str, ...] = ()  # recorded topics it publishes: recorded before the next node starts
 
 
-@dataclass(frozen=True)
-class Relay:
-    source: str  # the upstream node publishes here
-    topic: str  # recorded, and read by the nodes under test
-    msg_type: Any
-    subscribers: int  # subscriptions on ``topic`` to wait for: the recorder + the nodes under test
-    depth: int = 1000
-
-
-class _Relays:
-    """Raw forwarding of each relay's ``source`` to its ``topic`` on an executor thread; messages
-    are held until the relay's publisher has matched ``subscribers`` subscriptions."""
-
-    def __init__(self, context: Any, relays: list[Relay]) -> None:
-        from rclpy.executors import SingleThreadedExecutor
-        from rclpy.node import Node
-        from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-
-        self.node = Node(f"harness_relay_{uuid.uuid4().hex[:6]}", context=context)
-        self.relays = relays
-        self.held: dict[str, list[bytes]] = {r.topic: [] for r in relays}
-        self.forwarded: dict[str, int] = {r.topic: 0 for r in relays}
-        self.open: dict[str, bool] = {r.topic: False for r in relays}
-        self._pubs: dict[str, Any] = {}
-        for r in relays:
-            qos = QoSProfile(
-                history=HistoryPolicy.KEEP_LAST, depth=r.depth, reliability=ReliabilityPolicy.RELIABLE
-            )
-            self._pubs[r.topic] = self.node.create_publisher(r.msg_type, r.topic, qos)
-            self.node.create_subscription(
-                r.msg_type, r.source, lambda data, r=r: self._on_message(r, data), qos, raw=True
-            )
-        self.node.create_timer(0.01, self._release)
-        self.executor = SingleThreadedExecutor(context=context)
-        self.executor.add_node(self.node)
-        self._running = True
-        self._thread = threading.Thread(target=self._spin, name="harness-relay", daemon=True)
-        self._thread.start()
-
-    def _spin(self) -> None:
-        while self._running:
-            self.executor.spin_once(timeout_sec=0.05)
-
-    def _on_message(self, relay: Relay, data: bytes) -> None:
-        self.held[relay.topic].append(data)
-        self._release()
-
-    def _release(self) -> None:
-        for r in self.relays:
-            pub = self._pubs[r.topic]
-            if not self.open[r.topic] and pub.get_subscription_count() >= r.subscribers:
-                self.open[r.topic] = True  # from now on everything passes straight through
-            if self.open[r.topic] and self.held[r.topic]:
-                for data in self.held[r.topic]:
-                    pub.publish(data)
-                self.forwarded[r.topic] += len(self.held[r.topic])
-                self.held[r.topic].clear()
-
-    def problems(self) -> list[str]:
-        return [
-            f"relay {r.source} -> {r.topic}: {self._pubs[r.topic].get_subscription_count()} of "
-            f"{r.subscribers} subscriptions matched, {len(self.held[r.topic])} message(s) held back"
-            for r in self.relays
-            if self.held[r.topic]
-        ]
-
-    def close(self) -> None:
-        self._running = False
-        self._thread.join(2.0)
-        self.executor.shutdown(timeout_sec=1.0)
-        self.node.destroy_node()
-
-
 class OfflineHarness:
-    def __init__(
-        self, workdir: Path, timeout: float = 60.0, ros_context: Any = None, stop_gap: float = 0.5
-    ) -> None:
+    def __init__(self, workdir: Path, timeout: float = 60.0, stop_gap: float = 0.5) -> None:
         self.workdir = workdir
         self.timeout = timeout
-        self.ros_context = ros_context
         self.stop_gap = stop_gap
         self.logs: dict[str, str] = {}
 
@@ -187,18 +107,12 @@ class OfflineHarness:
         topics: list[str],
         nodes: list[NodeSpec],
         settle: float = 1.0,
-        relays: list[Relay] | None = None,
     ) -> Path:
-        """A live session of ``nodes`` (started in this order, after the ``relays``) with
-        ``topics`` recorded; returns the bag."""
+        """A live session of ``nodes`` (started in this order) with ``topics`` recorded;
+        returns the bag."""
         rec, bag = self._recorder(name, topics)
         procs: list[tuple[NodeSpec, NodeProcess]] = []
-        relay = None
         try:
-            if relays:
-                if self.ros_context is None:
-                    raise ValueError("relays need OfflineHarness(ros_context=...)")
-                relay = _Relays(self.ros_context, relays)
             for spec in nodes:
                 procs.append((spec, self._start(spec, rec, topics)))
             for topic in topics:
@@ -207,17 +121,8 @@ class OfflineHarness:
             for _spec, proc in procs:
                 proc.__exit__(None, None, None)
             rec.__exit__(None, None, None)
-            if relay is not None:
-                relay.close()
             raise
-        try:
-            self._finish(name, rec, procs, settle)
-            if relay is not None:
-                self.logs[f"{name}:relays"] = f"forwarded {relay.forwarded}"
-                assert not relay.problems(), relay.problems()
-        finally:
-            if relay is not None:
-                relay.close()
+        self._finish(name, rec, procs, settle)
         return bag
 
     def replay(

@@ -1,7 +1,7 @@
 """The offline harness on the bridge: a live session, recorded, replayed into the same node.
 
-Live: physio_simulator (LSL, 130 Hz ECG) -> physio_receiver ``rx_live`` (LSL -> ROS) -> the
-harness's relay (-> /ecg, held until the recorder and rx_window are both matched) ->
+Live: physio_simulator (LSL, 130 Hz ECG) -> physio_receiver ``rx_live`` (LSL -> ROS /ecg,
+held until its two readers, the recorder and rx_window, are both matched) ->
 physio_receiver ``rx_window`` (ROS -> ROS sliding windows, /ecg -> /ecg_win), while the
 recorder records both /ecg (the window node's input) and /ecg_win (its output). Then:
 
@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from offline_harness import NodeSpec, OfflineHarness, Relay
+from offline_harness import NodeSpec, OfflineHarness
 
 from helpers import NodeProcess, RosFrameCollector, concat_new_samples, wait_until
 from hri_physio_bridge.frames import Frame, msg_to_frame
@@ -45,11 +45,10 @@ def _same_frame(a: Frame, b: Frame) -> bool:
 
 
 def test_live_window_output_is_reproduced_by_replay(tmp_path: Path, lsl_name: str, ros_context) -> None:
-    from std_msgs.msg import Float64MultiArray
 
     uid = uuid.uuid4().hex[:8]
-    source, ecg, win = f"/harness_{uid}/ecg_live", f"/harness_{uid}/ecg", f"/harness_{uid}/ecg_win"
-    h = OfflineHarness(tmp_path, ros_context=ros_context)
+    ecg, win = f"/harness_{uid}/ecg", f"/harness_{uid}/ecg_win"
+    h = OfflineHarness(tmp_path)
 
     def rx_window() -> NodeSpec:
         return NodeSpec(
@@ -80,7 +79,7 @@ def test_live_window_output_is_reproduced_by_replay(tmp_path: Path, lsl_name: st
             "--input",
             f"lsl:{lsl_name}/PolarH10/SIM0001/ECG",
             "--output",
-            f"ros:{source}",
+            f"ros:{ecg}",
             "--num-channels",
             "1",
             "--output-frame",
@@ -91,6 +90,10 @@ def test_live_window_output_is_reproduced_by_replay(tmp_path: Path, lsl_name: st
             "60",
             "--wait-for-consumers",
             "60",
+            # /ecg has two readers, the recorder and rx_window: only once both are matched does
+            # rx_live read its input, so each of them sees every frame (see offline_harness)
+            "--min-consumers",
+            "2",
         ),
     )
     sim = NodeSpec(
@@ -109,14 +112,7 @@ def test_live_window_output_is_reproduced_by_replay(tmp_path: Path, lsl_name: st
         ),
         runs_to_end=True,
     )
-    # /ecg has two readers, the recorder and rx_window: the relay lets rx_live's frames through
-    # only once both are matched, so each of them sees every frame (see offline_harness).
-    live = h.record(
-        "live",
-        [ecg, win],
-        [rx_window(), rx_live, sim],
-        relays=[Relay(source, ecg, Float64MultiArray, subscribers=2)],
-    )
+    live = h.record("live", [ecg, win], [rx_window(), rx_live, sim])
 
     # the live input: every simulated sample reached the bag, once, in order, evenly spaced
     frames = [f for _, f in h.decoded(live, ecg, _frame)]

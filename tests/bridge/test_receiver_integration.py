@@ -400,6 +400,8 @@ def test_nan_samples_are_reported_and_forwarded(lsl_name: str, collector: RosFra
         ("", ["--input", "udp:1234"], "unknown stream scheme 'udp'"),
         ("", ["--sample-overlap", "3", "--output-frame", "2"], "sample_overlap must be >= 0 and <"),
         ("", ["--dtype", "complex"], "unknown dtype 'complex'"),
+        ("", ["--input", "lsl:a", "--output", "lsl:b", "--wait-for-consumers", "5", "--min-consumers", "2"],
+         "output lsl:b cannot count its listeners"),
     ],
 )
 def test_bad_configuration_one_clear_message(tmp_path: Path, conf_text: str, args: list,

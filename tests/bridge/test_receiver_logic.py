@@ -100,6 +100,22 @@ class MemorySink(Streamer):
         self.closed = True
 
 
+class CountingSink(MemorySink):
+    """An output that counts its listeners, as a ROS 2 publisher does."""
+
+    counts_consumers = True
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.count = 0
+
+    def has_consumers(self) -> bool:
+        return self.count > 0
+
+    def consumer_count(self) -> int:
+        return self.count
+
+
 def chunk(start: int, n: int, rate: float = 100.0, channels: int = 1) -> Frame:
     idx = np.arange(start, start + n, dtype=float)
     return Frame(idx / rate, np.column_stack([idx] * channels))
@@ -359,6 +375,8 @@ def test_request_stop_ends_the_wait_for_a_consumer(caplog: pytest.LogCaptureFixt
         ({"colour": "red"}, r"unknown option\(s\) \['colour'\]"),
         ({"input": ""}, "input must be a stream address"),
         ({"channel_names": ["a", "b"]}, "channel_names must list num_channels"),
+        ({"min_consumers": 0}, "min_consumers must be a whole number >= 1"),
+        ({"min_consumers": 2}, "min_consumers only counts while waiting: set wait_for_consumers"),
     ],
 )
 def test_bad_configuration_is_named(overrides: dict, match: str) -> None:
@@ -366,3 +384,55 @@ def test_bad_configuration_is_named(overrides: dict, match: str) -> None:
     opts.update(overrides)
     with pytest.raises(ConfigError, match=match):
         ReceiverConfig.from_mapping(opts)
+
+
+def test_waits_for_min_consumers_before_reading(caplog: pytest.LogCaptureFixture) -> None:
+    """A processor and a recorder must both see the first sample: with min_consumers 2 the
+    receiver reads nothing while only one listens, and starts once the second one does."""
+    cfg = ReceiverConfig.from_mapping({"input": "mem:source", "output": "mem:sink", "output_frame": 4,
+                                       "wait_for_consumers": 30.0, "min_consumers": 2})
+    src = MemorySource(StreamSpec("src", channel_count=1, nominal_rate=100.0))
+    sink = CountingSink()
+    rx = PhysioReceiver(cfg, src, sink, log=logging.getLogger("test"))
+    rx.open()
+    sink.count = 1
+    src.chunks.put(chunk(0, 8))  # waits in the open input meanwhile
+    started = threading.Event()
+    with caplog.at_level(logging.INFO, logger="test"):
+        t = threading.Thread(target=lambda: (rx.start(), started.set()))
+        t.start()
+        time.sleep(0.3)
+        assert not started.is_set() and rx.stats.received_samples == 0  # one listener is not enough
+        sink.count = 2
+        assert started.wait(2.0)
+        t.join()
+    src.chunks.put(None)
+    assert rx.wait(5.0)
+    rx.stop()
+    np.testing.assert_array_equal(np.concatenate([f.values[:, 0] for f in sink.frames]), np.arange(8))
+    assert log_lines(caplog, "waiting up to 30 s for 2 consumers on mem:sink")
+    assert log_lines(caplog, "mem:sink has 2 consumers")
+
+
+def test_min_consumers_times_out_with_the_count_named(caplog: pytest.LogCaptureFixture) -> None:
+    now = [0.0]
+    cfg = ReceiverConfig.from_mapping({"input": "mem:source", "output": "mem:sink", "output_frame": 4,
+                                       "wait_for_consumers": 5.0, "min_consumers": 3})
+    sink = CountingSink()
+    sink.count = 1
+    rx = PhysioReceiver(cfg, MemorySource(StreamSpec("src", nominal_rate=100.0)), sink,
+                        log=logging.getLogger("test"), monotonic=lambda: now[0])
+    rx.open()
+    threading.Timer(0.1, lambda: now.__setitem__(0, 6.0)).start()
+    with caplog.at_level(logging.INFO, logger="test"):
+        rx.start()  # gives up after the (fake) 5 s and starts anyway
+    rx.request_stop()
+    rx.stop()
+    assert log_lines(caplog, "no 3 consumers on mem:sink after 5 s (has 1); starting anyway")
+
+
+def test_min_consumers_needs_an_output_that_counts() -> None:
+    cfg = ReceiverConfig.from_mapping({"input": "mem:source", "output": "mem:sink", "output_frame": 4,
+                                       "wait_for_consumers": 5.0, "min_consumers": 2})
+    with pytest.raises(ConfigError, match="output mem:sink cannot count its listeners"):
+        PhysioReceiver(cfg, MemorySource(StreamSpec("src")), MemorySink())

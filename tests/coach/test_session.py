@@ -95,6 +95,13 @@ def test_closed_loop_session_runs_to_its_end_and_records_everything(short_sessio
     assert np.all(np.diff(hr_t) > 0)
     assert len(hr_t) >= (end - start)
     np.testing.assert_allclose(np.diff(hr_t), 1.0, atol=0.05)
+    # The receivers waited for all their listeners: the bag holds every sample each published,
+    # from the first (their last status, published after their input stopped, says how many).
+    ecg_n = sum(msg_to_frame(m).num_samples for m in msgs["/physio/polar_h10/ecg"])
+    for node, recorded in (("hr_receiver", len(hr_t)), ("ecg_receiver", ecg_n)):
+        final = events(msgs[f"/{node}/status"])[-1]
+        assert final["published_samples"] == recorded, (node, final)
+        assert final["received_samples"] == recorded and final["gaps"] == 0, (node, final)
 
     # The processor turned the ECG into features along the way.
     assert len(msgs["/physio/polar_h10/ecg/hr"]) >= 10

@@ -64,12 +64,13 @@ class ReceiverConfig:
     stream_type: str = ""
     channel_names: list[str] = field(default_factory=list)
     wait_for_consumers: float = 0.0
+    min_consumers: int = 1
 
     KEYS = (
         "input", "output", "dtype", "sampling_rate", "input_frame", "output_frame",
         "num_channels", "sample_overlap", "buffer_length", "log_data", "log_name",
         "overflow_policy", "resolve_timeout", "reconnect", "stream_type", "channel_names",
-        "wait_for_consumers",
+        "wait_for_consumers", "min_consumers",
     )
 
     @classmethod
@@ -94,7 +95,7 @@ class ReceiverConfig:
             self.dtype = canonical_dtype(self.dtype)
         except ValueError as exc:
             raise ConfigError(f"{source}: dtype: {exc}") from None
-        for key in ("input_frame", "output_frame", "num_channels", "buffer_length"):
+        for key in ("input_frame", "output_frame", "num_channels", "buffer_length", "min_consumers"):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 fail(key, "must be a whole number >= 1")
@@ -123,6 +124,8 @@ class ReceiverConfig:
                 fail(key, "must be a number of seconds")
             if getattr(self, key) < 0:
                 fail(key, "must be >= 0 seconds")
+        if self.min_consumers > 1 and self.wait_for_consumers <= 0:
+            fail("min_consumers", "only counts while waiting: set wait_for_consumers > 0 too")
         if self.channel_names and len(self.channel_names) != self.num_channels:
             fail("channel_names", f"must list num_channels ({self.num_channels}) names")
 
@@ -185,6 +188,11 @@ class PhysioReceiver:
         log_writer_factory: Callable[[StreamSpec], CsvWriter] | None = None,
     ) -> None:
         config.validate()
+        if config.min_consumers > 1 and not sink.counts_consumers:
+            raise ConfigError(
+                f"min_consumers {config.min_consumers}: output {sink.uri} cannot count its listeners "
+                "(LSL only tells whether one listens); use 1, or a ros: output"
+            )
         self.config = config
         self.source = source
         self.sink = sink
@@ -265,21 +273,28 @@ class PhysioReceiver:
             t.start()
 
     def _wait_for_consumers(self) -> None:
-        """Optionally hold the input until the output has a listener (log replays)."""
-        limit = self.config.wait_for_consumers
+        """Optionally hold the input until the output has ``min_consumers`` listeners (log
+        replays; a processor and a recorder that must both see the first sample). The input is
+        open meanwhile, so a live source's samples wait in its queue."""
+        limit, want = self.config.wait_for_consumers, self.config.min_consumers
         if limit <= 0:
             return
-        self.log.info(f"waiting up to {limit:g} s for a consumer on {self.sink.uri}")
+        what = "a consumer" if want == 1 else f"{want} consumers"
+        self.log.info(f"waiting up to {limit:g} s for {what} on {self.sink.uri}")
         deadline = self._monotonic() + limit
-        while not self.sink.has_consumers():
+        while not self._enough_consumers(want):
             if self._stop.is_set():
-                self.log.info(f"stopped while waiting for a consumer on {self.sink.uri}")
+                self.log.info(f"stopped while waiting for {what} on {self.sink.uri}")
                 return
             if self._monotonic() >= deadline:
-                self.log.warning(f"no consumer on {self.sink.uri} after {limit:g} s; starting anyway")
+                have = f" (has {self.sink.consumer_count()})" if want > 1 else ""
+                self.log.warning(f"no {what} on {self.sink.uri} after {limit:g} s{have}; starting anyway")
                 return
             self._stop.wait(0.02)
-        self.log.info(f"{self.sink.uri} has a consumer")
+        self.log.info(f"{self.sink.uri} has {what}")
+
+    def _enough_consumers(self, want: int) -> bool:
+        return self.sink.consumer_count() >= want if want > 1 else self.sink.has_consumers()
 
     def _guard(self, fn: Callable[[], None]) -> Callable[[], None]:
         def run() -> None:

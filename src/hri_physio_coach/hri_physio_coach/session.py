@@ -174,15 +174,21 @@ def start_nodes(group: ProcessGroup, args: argparse.Namespace, echo: bool) -> No
     group.start("participant", "simulated_participant", [
         "--ros-args", *sim, "-p", f"age:={args.age:.1f}", "-p", f"seed:={args.participant_seed}",
         "-p", f"device_id:={dev}", "-p", f"update_period:={CLOCK_STEP:.3f}"], echo=echo)
-    streams = [("HR", HR_TOPIC, 1, 1.0)]
+    # Each receiver holds its input until all of its listeners are there, so the bag and the
+    # coach (or processor) get every sample from the first: HR goes to this launcher's watcher,
+    # the recorder and (strap source) the coach; ECG to the processor and the recorder.
+    recorder = 0 if args.no_record else 1
+    streams = [("HR", HR_TOPIC, 1, 1.0, 1 + recorder + (args.hr_source == "strap"))]
     if not args.no_ecg:
-        streams.append(("ECG", ECG_TOPIC, 13, 130.0))
-    for stream, topic, frame, rate in streams:
+        streams.append(("ECG", ECG_TOPIC, 13, 130.0, 1 + recorder))
+    for stream, topic, frame, rate, listeners in streams:
         node = f"{stream.lower()}_receiver"
         group.start(node, "physio_receiver", [
             "--input", f"lsl:PolarH10/{dev}/{stream}", "--output", f"ros:{topic}",
             "--output-frame", str(frame), "--sampling-rate", f"{rate:g}",
-            "--resolve-timeout", f"{args.startup_timeout:g}", "--ros-args", "-r", f"__node:={node}",
+            "--resolve-timeout", f"{args.startup_timeout:g}",
+            "--wait-for-consumers", f"{args.startup_timeout:g}", "--min-consumers", str(listeners),
+            "--ros-args", "-r", f"__node:={node}",
         ], echo=echo)
     if not args.no_ecg:
         group.start("processor", "neurokit_processor", ["--input", f"ros:{ECG_TOPIC}"], echo=echo)

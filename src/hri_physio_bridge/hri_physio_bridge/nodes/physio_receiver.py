@@ -55,6 +55,8 @@ _HELP = {
     "stream_type": "stream type declared on LSL outputs (default: the input's)",
     "channel_names": "comma-separated channel labels (default: the input's)",
     "wait_for_consumers": "seconds to wait for a listener on the output before reading input (0 = no wait)",
+    "min_consumers": "with wait_for_consumers: how many listeners to wait for, e.g. 2 for a processor "
+    "and a recorder (ros: outputs only)",
 }
 
 

@@ -154,9 +154,16 @@ class Streamer(abc.ABC):
     def publish(self, frame: Frame) -> None:
         """Send a frame of samples."""
 
+    #: Whether :meth:`consumer_count` can count listeners (not just tell whether there is one).
+    counts_consumers = False
+
     def has_consumers(self) -> bool:
         """Whether anything listens to this output (transports that cannot tell say True)."""
         return True
+
+    def consumer_count(self) -> int:
+        """How many listen to this output; only meaningful when ``counts_consumers``."""
+        return int(self.has_consumers())
 
     def close(self) -> None:  # noqa: B027 - optional hook, most streamers need it
         """Release the transport (idempotent)."""

@@ -147,8 +147,13 @@ class RosStreamer(Streamer):
         else:
             self._pub.publish(frame_to_msg(frame))
 
+    counts_consumers = True
+
     def has_consumers(self) -> bool:
-        return self._pub is not None and self._pub.get_subscription_count() > 0
+        return self.consumer_count() > 0
+
+    def consumer_count(self) -> int:
+        return self._pub.get_subscription_count() if self._pub is not None else 0
 
     def close(self) -> None:
         if self._sub is not None:
