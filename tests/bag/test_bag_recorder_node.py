@@ -218,3 +218,32 @@ def test_sigkill_loses_at_most_the_flush_period_and_repair_works(tmp_path: Path,
     meta = check_bag(bag)
     assert meta["message_count"] == len(values)
     assert [int(m.data) for _, _, m in read_with_rosbags(bag)] == values
+
+
+def test_messages_lost_to_a_full_queue_are_reported_not_silent(tmp_path: Path, prefix: str, node) -> None:
+    """A queue of 5 taken every 0.5 s cannot hold a burst of 300: the recorder says how many
+    never reached it (from the publisher's sequence numbers), exactly, and keeps the count in
+    metadata.yaml."""
+    import yaml
+
+    bag = tmp_path / "lossy"
+    pub = node.create_publisher(String, f"{prefix}/burst", 1000)
+    with NodeProcess(
+        "recorder", f"{prefix}/burst", "-o", str(bag), "--discovery-period", "0.2",
+        "--qos-depth", "5", "--poll-period", "0.5",
+    ) as rec:
+        _wait_recorded(rec, pub, f"{prefix}/burst")
+        pub.publish(String(data="0"))  # taken alone: the publisher's sequence is then known
+        time.sleep(1.0)
+        for i in range(1, 300):
+            pub.publish(String(data=str(i)))
+        time.sleep(1.2)
+        assert rec.stop() == 0, rec.output
+        out = rec.output
+    got = [int(m.data) for _, _, m in read_with_rosbags(bag)]
+    lost = 300 - len(got)
+    assert got[0] == 0 and got[-1] == 299 and got == sorted(got) and lost > 0, got
+    assert "never reached the recorder (its queue overflowed: raise --qos-depth" in out, out
+    assert f"{prefix}/burst [std_msgs/msg/String]: {len(got)} messages, {lost} LOST (sequence gaps)" in out
+    meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert meta["custom_data"]["lost_messages"] == f"{prefix}/burst: {lost}"

@@ -63,3 +63,61 @@ def test_import_message_type() -> None:
         import_message_type("std_msgs/msg/NoSuchType")
     with pytest.raises(UnknownTypeError, match="not a ROS 2 type name"):
         import_message_type("String")
+
+
+def test_sequence_gaps_are_counted_per_publisher_reported_and_kept_in_metadata(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Two publishers on one topic, each with its own sequence; one skips 3 then 2 messages."""
+    import yaml
+
+    now = [0.0]
+    writer = BagWriter(tmp_path / "g")
+    session = RecordingSession(writer, TopicSelector(), logging.getLogger("test.recording"),
+                               monotonic=lambda: now[0])
+    (cand,) = session.candidates([("/hr", ["std_msgs/msg/String"])])
+    assert session.start_topic(cand, [default_qos()], [])
+    data = serialize(String(data="x"))
+
+    def take(seq: int, gid: bytes) -> None:
+        info = {"received_timestamp": 1000 + seq, "publication_sequence_number": seq,
+                "publisher_gid": {"implementation_identifier": "rmw_fastrtps_cpp", "data": gid}}
+        session.on_message("/hr", data, info)
+
+    a, b = b"\x01" * 16, b"\x02" * 16
+    with caplog.at_level(logging.WARNING, logger="test.recording"):
+        for seq in (500, 501):  # joined a running publisher: its first seen message is no gap
+            take(seq, a)
+        for seq in (1, 2, 3):  # the other publisher interleaves its own sequence
+            take(seq, b)
+        take(505, a)  # 502-504 missed
+        now[0] = 1.0
+        take(508, a)  # 506-507 missed: counted, summarised in the next line (rate limited)
+        session.on_message("/hr", data, {"publication_sequence_number": None})  # unsupported: skipped
+    assert session.lost == {"/hr": 5}
+    lines = [r.getMessage() for r in caplog.records]
+    assert lines == [
+        "/hr: 3 message(s) from one publisher never reached the recorder (its queue overflowed: raise "
+        "--qos-depth; or a best-effort link dropped them) (3 message(s) lost so far; repeats are "
+        "summarised at most every 5 s)"
+    ]
+    assert "8 messages" in session.status() and ", 5 lost" in session.status()
+    session.finish()
+    info = writer.close()
+    assert session.summary_lines(info) == ["/hr [std_msgs/msg/String]: 8 messages, 5 LOST (sequence gaps)"]
+    meta = yaml.safe_load((tmp_path / "g" / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert meta["custom_data"]["lost_messages"] == "/hr: 5"
+
+
+def test_no_loss_leaves_no_lost_entry(tmp_path: Path) -> None:
+    writer = BagWriter(tmp_path / "n")
+    session = RecordingSession(writer, TopicSelector(), logging.getLogger("test.recording"))
+    (cand,) = session.candidates([("/hr", ["std_msgs/msg/String"])])
+    session.start_topic(cand, [default_qos()], [])
+    for seq in range(1, 50):
+        session.on_message("/hr", serialize(String(data="x")),
+                           {"publication_sequence_number": seq, "publisher_gid": {"data": b"\x03" * 16}})
+    session.finish()
+    writer.close()
+    assert session.lost == {} and "lost" not in session.status()
+    assert "lost_messages" not in (tmp_path / "n" / "metadata.yaml").read_text()

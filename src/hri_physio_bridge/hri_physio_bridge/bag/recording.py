@@ -3,6 +3,13 @@
 The node shell polls the ROS graph and hands this class ``(topic, [types])`` lists and the
 publishers' offered QoS/type hashes; it creates the raw subscriptions this class asks for
 and passes every received buffer to :meth:`RecordingSession.on_message`.
+
+Messages that never reach the bag are found from each publisher's sequence numbers (in the
+middleware's message info): a gap means the subscription's queue overflowed (``--qos-depth``)
+or a best-effort link dropped them. They are reported, counted per topic and written to the
+bag's ``custom_data``, never silently lost. A publisher's first message taken is the start of
+its count: what it sent before that cannot be told apart from what it sent before the
+recorder subscribed.
 """
 
 from __future__ import annotations
@@ -23,6 +30,10 @@ from hri_physio_bridge.bag.msgdefs import (
 )
 from hri_physio_bridge.bag.topics import TopicSelector
 from hri_physio_bridge.bag.writer import BagWriter
+from hri_physio_bridge.rate_limit import RateLimitedLog
+
+#: custom_data key of metadata.yaml listing the messages lost per topic (only when some were).
+LOST_KEY = "lost_messages"
 
 
 @dataclass(frozen=True)
@@ -44,6 +55,7 @@ class RecordingSession:
         import_type: Callable[[str], Any] = import_message_type,
         definition: Callable[[str], str] = message_definition,
         wall_ns: Callable[[], int] = time.time_ns,
+        monotonic: Callable[[], float] = time.monotonic,
     ) -> None:
         self.writer = writer
         self.selector = selector
@@ -54,6 +66,9 @@ class RecordingSession:
         self.recording: dict[str, str] = {}
         self.skipped: dict[str, str] = {}
         self._last_report = (0, 0)
+        self.lost: dict[str, int] = {}  # messages missed per topic (publisher sequence gaps)
+        self._last_seq: dict[tuple[str, bytes], int] = {}
+        self._loss_log = RateLimitedLog(lambda text: self.log.warning(text), monotonic=monotonic)
 
     # -- discovery -----------------------------------------------------------
     def _skip(self, topic: str, reason: str) -> None:
@@ -120,7 +135,32 @@ class RecordingSession:
         received = int(info.get("received_timestamp") or 0) if info else 0
         source = int(info.get("source_timestamp") or 0) if info else 0
         seq = int(info.get("publication_sequence_number") or 0) if info else 0
+        if seq:
+            gid = info.get("publisher_gid") if info else None
+            if gid:
+                self._check_sequence(topic, bytes(gid["data"]), seq)
         self.writer.write(topic, received or self._wall_ns(), data, source, seq)
+
+    def _check_sequence(self, topic: str, publisher: bytes, seq: int) -> None:
+        key = (topic, publisher)
+        last = self._last_seq.get(key)
+        self._last_seq[key] = seq
+        if last is None or seq <= last + 1:
+            return  # a publisher's first message here, the next one, or a restart
+        missed = seq - last - 1
+        self.lost[topic] = self.lost.get(topic, 0) + missed
+        self._loss_log.report(
+            topic,
+            f"{topic}: {missed} message(s) from one publisher never reached the recorder (its queue "
+            "overflowed: raise --qos-depth; or a best-effort link dropped them)",
+            "message(s) lost",
+            missed,
+        )
+
+    def finish(self) -> None:
+        """Before closing the bag: note the lost messages in its metadata."""
+        if self.lost:
+            self.writer.custom_data[LOST_KEY] = ", ".join(f"{t}: {n}" for t, n in sorted(self.lost.items()))
 
     # -- reporting -----------------------------------------------------------
     def status(self, interval: float | None = None) -> str:
@@ -130,6 +170,8 @@ class RecordingSession:
             f"{st.messages} messages, {st.bytes / 1e6:.2f} MB payload, file {st.file_bytes / 1e6:.2f} MB, "
             f"{st.chunks_flushed} chunks flushed"
         )
+        if self.lost:
+            text += f", {sum(self.lost.values())} lost"
         if interval:
             dm = st.messages - self._last_report[0]
             db = st.bytes - self._last_report[1]
@@ -138,6 +180,10 @@ class RecordingSession:
         return text
 
     def summary_lines(self, info: BagInfo) -> list[str]:
-        lines = [f"{t.name} [{t.type}]: {t.message_count} messages" for t in info.topics]
+        lines = [
+            f"{t.name} [{t.type}]: {t.message_count} messages"
+            + (f", {self.lost[t.name]} LOST (sequence gaps)" if t.name in self.lost else "")
+            for t in info.topics
+        ]
         lines += [f"{topic}: skipped ({why})" for topic, why in sorted(self.skipped.items())]
         return lines

@@ -280,6 +280,7 @@ def _record(args: argparse.Namespace, ros_args: list[str], selector: TopicSelect
             node.destroy_subscription(sub)
         if not writer.closed:
             try:
+                session.finish()
                 info = writer.close()
                 log.info(
                     f"bag closed: {writer.bag_dir} ({info.message_count} messages, "
