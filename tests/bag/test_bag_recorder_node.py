@@ -247,3 +247,7 @@ def test_messages_lost_to_a_full_queue_are_reported_not_silent(tmp_path: Path, p
     assert f"{prefix}/burst [std_msgs/msg/String]: {len(got)} messages, {lost} LOST (sequence gaps)" in out
     meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert meta["custom_data"]["lost_messages"] == f"{prefix}/burst: {lost}"
+    info = subprocess.run([str(Path(sys.prefix) / "bin" / "replayer"), str(bag), "--info"],
+                          capture_output=True, text=True, timeout=60)
+    assert info.returncode == 0 and f"custom:    lost_messages: {prefix}/burst: {lost}" in info.stdout
+    assert f"the recorder missed messages while recording this bag ({prefix}/burst: {lost})" in info.stderr

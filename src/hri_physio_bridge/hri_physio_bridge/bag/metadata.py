@@ -23,6 +23,8 @@ STORAGE_ID = "mcap"
 METADATA_FILE = "metadata.yaml"
 ROOT_KEY = "rosbag2_bagfile_information"
 HASH_RE = re.compile(r"^RIHS01_[0-9a-f]{64}$")
+#: custom_data key under which the recorder lists the messages it missed, per topic.
+LOST_KEY = "lost_messages"
 QOS_KEYS = (
     "history",
     "depth",

@@ -19,7 +19,7 @@ from mcap.reader import SeekingReader
 from mcap.records import Channel, Schema
 
 from hri_physio_bridge.bag.errors import BagError
-from hri_physio_bridge.bag.metadata import METADATA_FILE, TopicInfo, load_metadata
+from hri_physio_bridge.bag.metadata import LOST_KEY, METADATA_FILE, TopicInfo, load_metadata
 from hri_physio_bridge.bag.recovery import McapScanner, topic_info_from_channel
 
 
@@ -90,6 +90,7 @@ class BagReader:
         self.path = Path(path)
         self.warnings: list[str] = []
         self.topics: dict[str, TopicInfo] = {}
+        self.custom_data: dict[str, str] = {}  # metadata.yaml's (session id, lost messages...)
         if not self.path.exists():
             raise BagError(f"{self.path} does not exist")
         metadata = None
@@ -97,6 +98,7 @@ class BagReader:
             if (self.path / METADATA_FILE).exists():
                 metadata = load_metadata(self.path)
                 paths = [self.path / p for p in metadata["relative_file_paths"]]
+                self.custom_data = {str(k): str(v) for k, v in (metadata.get("custom_data") or {}).items()}
             else:
                 paths = sorted(self.path.glob("*.mcap"))
                 if not paths:
@@ -129,6 +131,10 @@ class BagReader:
                     f"{sum(f.counts.values())} message(s) that are intact"
                 )
         self._collect_topics(metadata)
+        if LOST_KEY in self.custom_data:
+            self.warnings.append(
+                f"the recorder missed messages while recording this bag ({self.custom_data[LOST_KEY]})"
+            )
 
     def _collect_topics(self, metadata: dict | None) -> None:
         from_meta: dict[str, TopicInfo] = {}

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from hri_physio_bridge.bag.errors import BagError
-from hri_physio_bridge.bag.metadata import HASH_RE, BagInfo
+from hri_physio_bridge.bag.metadata import HASH_RE, LOST_KEY, BagInfo
 from hri_physio_bridge.bag.msgdefs import (
     UnknownTypeError,
     import_message_type,
@@ -31,9 +31,6 @@ from hri_physio_bridge.bag.msgdefs import (
 from hri_physio_bridge.bag.topics import TopicSelector
 from hri_physio_bridge.bag.writer import BagWriter
 from hri_physio_bridge.rate_limit import RateLimitedLog
-
-#: custom_data key of metadata.yaml listing the messages lost per topic (only when some were).
-LOST_KEY = "lost_messages"
 
 
 @dataclass(frozen=True)

@@ -102,6 +102,8 @@ def print_info(bag: BagReader) -> None:
     print(f"messages:  {bag.message_count}")
     for t in bag.topics.values():
         print(f"  {t.name} [{t.type}] {t.message_count} msgs, hash {t.type_description_hash or '-'}")
+    for key, value in bag.custom_data.items():
+        print(f"custom:    {key}: {value}")
 
 
 def select(bag: BagReader, args: argparse.Namespace) -> dict[str, Any]:
