@@ -230,11 +230,11 @@ def test_messages_lost_to_a_full_queue_are_reported_not_silent(tmp_path: Path, p
     pub = node.create_publisher(String, f"{prefix}/burst", 1000)
     with NodeProcess(
         "recorder", f"{prefix}/burst", "-o", str(bag), "--discovery-period", "0.2",
-        "--qos-depth", "5", "--poll-period", "0.5",
+        "--qos-depth", "5", "--poll-period", "0.5", "--status-period", "0.2",
     ) as rec:
         _wait_recorded(rec, pub, f"{prefix}/burst")
         pub.publish(String(data="0"))  # taken alone: the publisher's sequence is then known
-        time.sleep(1.0)
+        rec.wait_for_output("skipped; 1 messages", timeout=30)
         for i in range(1, 300):
             pub.publish(String(data=str(i)))
         time.sleep(1.2)

@@ -287,8 +287,8 @@ class PhysioReceiver:
                 self.log.info(f"stopped while waiting for {what} on {self.sink.uri}")
                 return
             if self._monotonic() >= deadline:
-                have = f" (has {self.sink.consumer_count()})" if want > 1 else ""
-                self.log.warning(f"no {what} on {self.sink.uri} after {limit:g} s{have}; starting anyway")
+                have = f"only {self.sink.consumer_count()} of {want} consumers" if want > 1 else "no consumer"
+                self.log.warning(f"{have} on {self.sink.uri} after {limit:g} s; starting anyway")
                 return
             self._stop.wait(0.02)
         self.log.info(f"{self.sink.uri} has {what}")
