@@ -121,3 +121,33 @@ def test_no_loss_leaves_no_lost_entry(tmp_path: Path) -> None:
     writer.close()
     assert session.lost == {} and "lost" not in session.status()
     assert "lost_messages" not in (tmp_path / "n" / "metadata.yaml").read_text()
+
+
+def test_low_disk_space_is_warned_early_and_not_every_report(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    from hri_physio_bridge.bag.recording import LOW_DISK_BYTES
+
+    now = [0.0]
+    writer = BagWriter(tmp_path / "d")
+    session = RecordingSession(writer, TopicSelector(), logging.getLogger("test.recording"),
+                               monotonic=lambda: now[0])
+    gb = 1_000_000_000
+    with caplog.at_level(logging.WARNING, logger="test.recording"):
+        writer.stats.file_bytes = 50_000_000  # 50 MB in 5 s: 10 MB/s
+        assert not session.check_disk(10 * gb, 5.0)  # 1000 s left: fine
+        writer.stats.file_bytes += 50_000_000
+        assert session.check_disk(5 * gb, 5.0)  # 500 s left at 10 MB/s: warn
+        now[0] = 5.0
+        writer.stats.file_bytes += 50_000_000
+        assert session.check_disk(4 * gb, 5.0)  # still low, but warned 5 s ago: quiet
+        now[0] = 70.0
+        assert session.check_disk(LOW_DISK_BYTES - 1, 65.0)  # nothing written: low by size alone
+    lines = [r.getMessage() for r in caplog.records]
+    assert lines == [
+        f"low disk space for {writer.bag_dir}: 5.00 GB free, about 8 min at 10.00 MB/s; free some "
+        "space or the recording stops when the disk is full",
+        f"low disk space for {writer.bag_dir}: 0.50 GB free; free some space or the recording stops "
+        "when the disk is full",
+    ]
+    writer.close()

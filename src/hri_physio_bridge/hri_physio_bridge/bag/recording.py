@@ -15,6 +15,7 @@ recorder subscribed.
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -31,6 +32,11 @@ from hri_physio_bridge.bag.msgdefs import (
 from hri_physio_bridge.bag.topics import TopicSelector
 from hri_physio_bridge.bag.writer import BagWriter
 from hri_physio_bridge.rate_limit import RateLimitedLog
+
+#: Warn when the bag's disk has less free space than this many seconds of recording ...
+LOW_DISK_SECONDS = 600.0
+#: ... or than this many bytes, whatever the rate.
+LOW_DISK_BYTES = 500_000_000
 
 
 @dataclass(frozen=True)
@@ -66,6 +72,9 @@ class RecordingSession:
         self.lost: dict[str, int] = {}  # messages missed per topic (publisher sequence gaps)
         self._last_seq: dict[tuple[str, bytes], int] = {}
         self._loss_log = RateLimitedLog(lambda text: self.log.warning(text), monotonic=monotonic)
+        self._file_bytes_seen = 0
+        self._monotonic = monotonic
+        self._last_disk_warning = -math.inf
 
     # -- discovery -----------------------------------------------------------
     def _skip(self, topic: str, reason: str) -> None:
@@ -160,6 +169,26 @@ class RecordingSession:
             self.writer.custom_data[LOST_KEY] = ", ".join(f"{t}: {n}" for t, n in sorted(self.lost.items()))
 
     # -- reporting -----------------------------------------------------------
+    def check_disk(self, free_bytes: int, interval: float) -> bool:
+        """Warn when the disk will be full within LOW_DISK_SECONDS at the file growth of the
+        last ``interval`` seconds, or has less than LOW_DISK_BYTES free (a full disk stops the
+        recording: better to know ten minutes before). At most one warning a minute; returns
+        whether space is low."""
+        grown = self.writer.stats.file_bytes - self._file_bytes_seen
+        self._file_bytes_seen = self.writer.stats.file_bytes
+        rate = grown / interval if interval > 0 else 0.0
+        if free_bytes >= max(LOW_DISK_BYTES, rate * LOW_DISK_SECONDS):
+            return False
+        now = self._monotonic()
+        if now - self._last_disk_warning >= 60.0:
+            self._last_disk_warning = now
+            left = f", about {free_bytes / rate / 60:.0f} min at {rate / 1e6:.2f} MB/s" if rate > 0 else ""
+            self.log.warning(
+                f"low disk space for {self.writer.bag_dir}: {free_bytes / 1e9:.2f} GB free{left}; "
+                "free some space or the recording stops when the disk is full"
+            )
+        return True
+
     def status(self, interval: float | None = None) -> str:
         st = self.writer.stats
         text = (

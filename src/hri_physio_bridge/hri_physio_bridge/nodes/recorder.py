@@ -15,6 +15,7 @@ least every --flush-period seconds, so a crash loses at most that much.
 from __future__ import annotations
 
 import argparse
+import shutil
 import sys
 import time
 from collections.abc import Callable
@@ -253,6 +254,7 @@ def _record(args: argparse.Namespace, ros_args: list[str], selector: TopicSelect
             f"{'all topics' if selector.records_all else 'selected topics'}; chunks flushed every "
             f"{writer.flush_period:g} s or {writer.chunk_size} bytes)"
         )
+        session.check_disk(shutil.disk_usage(writer.bag_dir).free, 0.0)
         discover()
         node.create_timer(args.discovery_period, discover)
         node.create_timer(min(writer.flush_period / 4, 0.25), writer.tick)
@@ -262,6 +264,7 @@ def _record(args: argparse.Namespace, ros_args: list[str], selector: TopicSelect
             nonlocal last_status
             now = time.monotonic()
             log.info(session.status(now - last_status))
+            session.check_disk(shutil.disk_usage(writer.bag_dir).free, now - last_status)
             last_status = now
 
         node.create_timer(args.status_period, report)
