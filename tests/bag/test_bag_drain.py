@@ -44,12 +44,12 @@ def test_a_flooding_topic_does_not_starve_the_others() -> None:
     def on_message(topic: str, data: bytes, info: dict[str, int]) -> None:
         got.append((topic, data, info["received_timestamp"]))
 
-    assert drain_subscriptions(subs, on_message, budget=10) is True  # /flood has more
+    assert drain_subscriptions(subs, on_message, budget=10) == (13, True)  # /flood has more
     assert [d for t, d, _ in got if t == "/hr"] == [b"/hr:0", b"/hr:1", b"/hr:2"]
     assert len([1 for t, *_ in got if t == "/flood"]) == 10
-    assert drain_subscriptions(subs, on_message, budget=10) is True
-    assert drain_subscriptions(subs, on_message, budget=10) is False  # 5 left: emptied
-    assert drain_subscriptions(subs, on_message, budget=10) is False  # nothing waiting
+    assert drain_subscriptions(subs, on_message, budget=10) == (10, True)
+    assert drain_subscriptions(subs, on_message, budget=10) == (5, False)  # emptied
+    assert drain_subscriptions(subs, on_message, budget=10) == (0, False)  # nothing waiting
     flood = [(d, stamp) for t, d, stamp in got if t == "/flood"]
     assert [d for d, _ in flood] == [f"/flood:{i}".encode() for i in range(25)]  # each once, in order
     assert [stamp for _, stamp in flood] == list(range(25))  # the middleware's info is passed on
@@ -58,6 +58,6 @@ def test_a_flooding_topic_does_not_starve_the_others() -> None:
 def test_exactly_budget_waiting_reports_more_then_empties() -> None:
     subs = {"/a": FakeSubscription("/a", 4)}
     got: list[str] = []
-    assert drain_subscriptions(subs, lambda t, d, i: got.append(d), budget=4) is True
-    assert drain_subscriptions(subs, lambda t, d, i: got.append(d), budget=4) is False
+    assert drain_subscriptions(subs, lambda t, d, i: got.append(d), budget=4) == (4, True)
+    assert drain_subscriptions(subs, lambda t, d, i: got.append(d), budget=4) == (0, False)
     assert len(got) == 4

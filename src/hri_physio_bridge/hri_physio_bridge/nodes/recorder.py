@@ -32,6 +32,8 @@ PROG = "recorder"
 DEFAULT_POLL_PERIOD = 0.01
 #: Messages taken per topic per pass before the executor runs timers again.
 DRAIN_BUDGET = 2000
+#: Seconds the idle loop waits in the executor (a stop request is seen within this).
+IDLE_WAIT = 0.1
 
 
 def _positive(text: str) -> float:
@@ -109,7 +111,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--poll-period",
         type=_positive,
         default=DEFAULT_POLL_PERIOD,
-        help=f"seconds between takes of the queued messages when idle (default {DEFAULT_POLL_PERIOD:g}); "
+        help=f"seconds between takes of queued messages while they flow (default {DEFAULT_POLL_PERIOD:g}); "
         "receive stamps come from the middleware, so this only delays the disk",
     )
     p.add_argument(
@@ -160,12 +162,13 @@ def _qos_profile(values: dict[str, Any]) -> Any:
 
 def drain_subscriptions(
     subs: dict[str, Any], on_message: Callable[[str, bytes, dict[str, Any]], None], budget: int = DRAIN_BUDGET
-) -> bool:
+) -> tuple[int, bool]:
     """Take the messages waiting in raw subscriptions ``{topic: subscription}`` straight from
-    their handles, without the executor's per-callback task machinery; True if a topic still
-    has more. At most ``budget`` per topic, so a flooding topic cannot starve the others.
-    Call it from the executor's thread: each topic's order is then kept."""
-    more = False
+    their handles, without the executor's per-callback task machinery. Returns how many were
+    taken and whether a topic still has more: at most ``budget`` per topic, so a flooding topic
+    cannot starve the others. Call it from the executor's thread: each topic's order is then
+    kept."""
+    taken, more = 0, False
     for topic, sub in list(subs.items()):
         with sub.handle:
             for _ in range(budget):
@@ -173,9 +176,10 @@ def drain_subscriptions(
                 if item is None:
                     break
                 on_message(topic, item[0], item[1])
+                taken += 1
             else:
                 more = True
-    return more
+    return taken, more
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -269,12 +273,18 @@ def _record(args: argparse.Namespace, ros_args: list[str], selector: TopicSelect
 
         node.create_timer(args.status_period, report)
         while not stop.is_set() and rclpy.ok():
-            # Messages wait in the subscriptions' queues (stamped on arrival by the middleware)
-            # and are taken in batches every --poll-period: waking for each one would cost a
-            # whole executor pass per message. Timers and graph events run once per pass.
-            if not drain_subscriptions(subs, session.on_message):
+            # Messages wait in the subscriptions' queues (stamped on arrival by the middleware).
+            # While they flow they are taken in batches every --poll-period: waking for each
+            # one would cost a whole executor pass per message. Idle, the executor waits for the
+            # next message or timer (a poll loop would cost CPU for nothing).
+            taken, more = drain_subscriptions(subs, session.on_message)
+            if more:
+                executor.spin_once(timeout_sec=0.0)
+            elif taken:
                 stop.wait(args.poll_period)
-            executor.spin_once(timeout_sec=0.0)
+                executor.spin_once(timeout_sec=0.0)
+            else:
+                executor.spin_once(timeout_sec=IDLE_WAIT)
     except (BagError, OSError) as exc:
         log.error(f"recording failed: {exc}")
         code = 1
