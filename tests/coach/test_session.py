@@ -127,6 +127,8 @@ def test_sigint_stops_every_node_and_closes_the_bag(short_session: list[str]) ->
     out = session.output
     assert code == 0, out
     assert "SIGINT: stopping the session" in out and "Traceback" not in out
+    stopped = r"\[session\] stopped before its end: 0\.\d min of session in \d+ s wall \(1x\)"
+    assert re.search(stopped, out), out
     bag = Path(re.search(r"recorded to (\S+)", out).group(1))
     assert (bag / "metadata.yaml").is_file()
     coach = events(read_bag(bag)["/coach/events"])

@@ -40,3 +40,12 @@ def test_view_counts_adaptations_gated_updates_and_time_in_zone() -> None:
     assert "2 rule update(s) gated: too few valid HR samples: N < N" in text
     assert "recorded to bags/x" in text
     assert "ended" in view.progress(1390.0)
+
+
+def test_summary_of_a_session_stopped_before_its_end() -> None:
+    view = SessionView()
+    text = summary(view, wall=12.0, bag=None, now=5.0)
+    assert "stopped before the session started, after 12 s wall" in text
+    view.on_event({"t": 10.0, "event": "session_start"})
+    text = summary(view, wall=255.0, bag=None, now=250.0)
+    assert "[session] stopped before its end: 4.0 min of session in 255 s wall (1x)" in text

@@ -297,7 +297,7 @@ def main(argv: list[str] | None = None) -> int:
             bag = next((line.split("recording to ", 1)[1].split()[0] for line in rec.lines
                         if "recording to " in line), None)
         watcher.close()
-    print(summary(view, wall, bag), flush=True)
+    print(summary(view, wall, bag, now=clock.t), flush=True)
     bad = {name: c for name, c in codes.items() if c != 0}
     if bad:
         print(f"hri_physio_session: error: node exit codes {bad}", file=sys.stderr, flush=True)

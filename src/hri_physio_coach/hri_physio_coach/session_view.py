@@ -97,16 +97,23 @@ class SimClock:
         return steps
 
 
-def summary(view: SessionView, wall: float, bag: str | None) -> str:
+def summary(view: SessionView, wall: float, bag: str | None, now: float | None = None) -> str:
+    """The closing lines; ``now`` (sim time) measures a session stopped before its end."""
     t0, t1 = view.started_at, view.ended_at
-    sim = (t1 - t0) if t0 is not None and t1 is not None else 0.0
+    end = t1 if t1 is not None else now
+    sim = (end - t0) if t0 is not None and end is not None else 0.0
+    if t0 is None:
+        head = f"[session] stopped before the session started, after {wall:.0f} s wall"
+    else:
+        how = "done" if t1 is not None else "stopped before its end"
+        factor = sim / wall if wall else 0.0
+        head = f"[session] {how}: {sim / 60:.1f} min of session in {wall:.0f} s wall ({factor:.0f}x)"
     in_zone = (f"{100.0 * view.exercise_in_zone / view.exercise_hr:.0f} % of {view.exercise_hr} exercise HR "
                f"samples in the zone" if view.exercise_hr else "no exercise HR samples")
     zone = f"{view.zone[0]:.1f}-{view.zone[1]:.1f} bpm" if view.zone else "never set"
-    factor = sim / wall if wall else 0.0
     updates, behaviours = view.events.get("rule_update", 0), view.events.get("behaviour", 0)
     return "\n".join([
-        f"[session] done: {sim / 60:.1f} min of session in {wall:.0f} s wall ({factor:.0f}x)",
+        head,
         f"[session] zone {zone}; {in_zone}; {view.adaptations} adaptations in {updates} rule updates; "
         f"{behaviours} behaviours; {view.robot_actions} robot actions",
         *(f"[session] {n} rule update(s) gated: {reason}" for reason, n in sorted(view.gated.items())),
