@@ -72,11 +72,7 @@ def test_sequence_gaps_are_counted_per_publisher_reported_and_kept_in_metadata(
     import yaml
 
     now = [0.0]
-    writer = BagWriter(tmp_path / "g")
-    session = RecordingSession(writer, TopicSelector(), logging.getLogger("test.recording"),
-                               monotonic=lambda: now[0])
-    (cand,) = session.candidates([("/hr", ["std_msgs/msg/String"])])
-    assert session.start_topic(cand, [default_qos()], [])
+    writer, session = _hr_session(tmp_path / "g", now)
     data = serialize(String(data="x"))
 
     def take(seq: int, gid: bytes) -> None:
@@ -110,10 +106,7 @@ def test_sequence_gaps_are_counted_per_publisher_reported_and_kept_in_metadata(
 
 
 def test_no_loss_leaves_no_lost_entry(tmp_path: Path) -> None:
-    writer = BagWriter(tmp_path / "n")
-    session = RecordingSession(writer, TopicSelector(), logging.getLogger("test.recording"))
-    (cand,) = session.candidates([("/hr", ["std_msgs/msg/String"])])
-    session.start_topic(cand, [default_qos()], [])
+    writer, session = _hr_session(tmp_path / "n", [0.0])
     for seq in range(1, 50):
         session.on_message("/hr", serialize(String(data="x")),
                            {"publication_sequence_number": seq, "publisher_gid": {"data": b"\x03" * 16}})
@@ -129,9 +122,7 @@ def test_low_disk_space_is_warned_early_and_not_every_report(
     from hri_physio_bridge.bag.recording import LOW_DISK_BYTES
 
     now = [0.0]
-    writer = BagWriter(tmp_path / "d")
-    session = RecordingSession(writer, TopicSelector(), logging.getLogger("test.recording"),
-                               monotonic=lambda: now[0])
+    writer, session = _hr_session(tmp_path / "d", now)
     gb = 1_000_000_000
     with caplog.at_level(logging.WARNING, logger="test.recording"):
         writer.stats.file_bytes = 50_000_000  # 50 MB in 5 s: 10 MB/s
@@ -151,3 +142,13 @@ def test_low_disk_space_is_warned_early_and_not_every_report(
         "when the disk is full",
     ]
     writer.close()
+
+
+def _hr_session(bag: Path, now: list[float]) -> tuple[BagWriter, RecordingSession]:
+    """A session recording /hr (std_msgs/String) into ``bag``, on the fake clock ``now``."""
+    writer = BagWriter(bag)
+    session = RecordingSession(writer, TopicSelector(), logging.getLogger("test.recording"),
+                               monotonic=lambda: now[0])
+    (cand,) = session.candidates([("/hr", ["std_msgs/msg/String"])])
+    assert session.start_topic(cand, [default_qos()], [])
+    return writer, session
