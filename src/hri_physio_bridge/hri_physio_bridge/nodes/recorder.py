@@ -9,7 +9,10 @@ Examples::
 
 Topics that appear later are picked up (the graph is polled). Messages are stored as
 received (raw CDR), stamped with their receive time. Completed chunks reach the disk at
-least every --flush-period seconds, so a crash loses at most that much.
+least every --flush-period seconds, so a crash loses at most that much. Messages that never
+reach the recorder (a full queue, a best-effort drop) are found from the publishers' sequence
+numbers, reported, and listed in the bag's metadata (lost_messages); low disk space is warned
+about before it stops the recording.
 """
 
 from __future__ import annotations
