@@ -251,3 +251,19 @@ def test_messages_lost_to_a_full_queue_are_reported_not_silent(tmp_path: Path, p
                           capture_output=True, text=True, timeout=60)
     assert info.returncode == 0 and f"custom:    lost_messages: {prefix}/burst: {lost}" in info.stdout
     assert f"the recorder missed messages while recording this bag ({prefix}/burst: {lost})" in info.stderr
+
+
+def test_messages_queued_at_the_stop_are_recorded(tmp_path: Path, prefix: str, node) -> None:
+    """Stopped between two takes (a 5 s poll): what had arrived is still taken into the bag."""
+    bag = tmp_path / "tail"
+    pub = node.create_publisher(String, f"{prefix}/tail", 100)
+    with NodeProcess(
+        "recorder", f"{prefix}/tail", "-o", str(bag), "--discovery-period", "0.2", "--poll-period", "5"
+    ) as rec:
+        _wait_recorded(rec, pub, f"{prefix}/tail")
+        time.sleep(0.5)
+        for i in range(50):
+            pub.publish(String(data=str(i)))
+        time.sleep(0.3)  # delivered to the recorder's queue, not yet taken
+        assert rec.stop(signal.SIGINT) == 0, rec.output
+    assert [int(m.data) for _, _, m in read_with_rosbags(bag)] == list(range(50))

@@ -279,6 +279,8 @@ def _record(args: argparse.Namespace, ros_args: list[str], selector: TopicSelect
             tasks.run_due()
             if not more:
                 stop.wait(args.poll_period)
+        while drain_subscriptions(subs, session.on_message)[1]:
+            pass  # stopping: what arrived since the last pass goes into the bag too
     except (BagError, OSError) as exc:
         log.error(f"recording failed: {exc}")
         code = 1
