@@ -27,8 +27,10 @@ import sys
 import threading
 import time
 from collections.abc import Callable
+from datetime import datetime
 from pathlib import Path
 
+from hri_physio_bridge.bag.topics import bag_name
 from hri_physio_bridge.launcher import ProcessGroup
 from hri_physio_bridge.nodes.common import install_stop_handlers
 from hri_physio_bridge.ros_tools import BackgroundNode, clock_message
@@ -161,12 +163,15 @@ def _check(args: argparse.Namespace) -> str | None:
     return None
 
 
-def start_nodes(group: ProcessGroup, args: argparse.Namespace, echo: bool) -> None:
+def start_nodes(group: ProcessGroup, args: argparse.Namespace, echo: bool) -> Path | None:
+    """Start every node; returns the bag directory the recorder writes (None: not recording)."""
     sim = ["-p", "use_sim_time:=true"]
     dev = args.device_id
+    bag: Path | None = None
     if not args.no_record:
         args.bag_dir.mkdir(parents=True, exist_ok=True)
-        group.start("recorder", "recorder", ["--output-dir", str(args.bag_dir), "--session-id", "session",
+        bag = args.bag_dir / bag_name("session", datetime.now())
+        group.start("recorder", "recorder", ["-o", str(bag), "--session-id", "session",
                                              "--discovery-period", "0.2", "--status-period", "10"], echo=echo)
     joint_rate = f"joint_state_rate:={1 / CLOCK_STEP:.1f}"
     group.start("mock", "mock_qt_robot", ["--ros-args", *sim, "-p", joint_rate], echo=echo)
@@ -204,6 +209,7 @@ def start_nodes(group: ProcessGroup, args: argparse.Namespace, echo: bool) -> No
     if args.routine is not None:
         coach += ["-p", f"routine_file:={args.routine.resolve()}"]
     group.start("coach", "qt_physio_coach", coach, echo=echo)
+    return bag
 
 
 def wait_for_system(watcher: ClockAndWatcher, group: ProcessGroup, clock: SimClock, view: SessionView,
@@ -255,8 +261,9 @@ def main(argv: list[str] | None = None) -> int:
           f"({args.policy}) -> mock QT robot, at {args.speed:g}x real time", flush=True)
     code = 0
     wall = 0.0
+    bag: Path | None = None
     try:
-        start_nodes(group, args, echo=not args.quiet_nodes)
+        bag = start_nodes(group, args, echo=not args.quiet_nodes)
         problem = wait_for_system(watcher, group, clock, view, stop, args.startup_timeout)
         if problem:
             print(f"hri_physio_session: error: {problem}", file=sys.stderr, flush=True)
@@ -291,13 +298,9 @@ def main(argv: list[str] | None = None) -> int:
             time.sleep(0.01)
     finally:
         codes = group.stop()
-        bag: str | None = None
-        rec = next((p for p in group.procs if p.name == "recorder"), None)
-        if rec is not None:
-            bag = next((line.split("recording to ", 1)[1].split()[0] for line in rec.lines
-                        if "recording to " in line), None)
         watcher.close()
-    print(summary(view, wall, bag, now=clock.t), flush=True)
+    recorded = str(bag) if bag is not None and bag.exists() else None
+    print(summary(view, wall, recorded, now=clock.t), flush=True)
     bad = {name: c for name, c in codes.items() if c != 0}
     if bad:
         print(f"hri_physio_session: error: node exit codes {bad}", file=sys.stderr, flush=True)
