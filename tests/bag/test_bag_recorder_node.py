@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import subprocess
 import sys
 import time
 import uuid
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 from bagkit import check_bag, read_with_mcap, read_with_rosbags
@@ -38,6 +41,18 @@ def _wait_recorded(rec: NodeProcess, pub, topic: str) -> None:
     rec.wait_for_output(f"recording {topic} ", timeout=30)
     wait_until(lambda: pub.get_subscription_count() > 0, 30, f"recorder subscription on {topic}")
     time.sleep(0.2)  # let the subscriber side finish matching too
+
+
+@contextlib.contextmanager
+def _recording_one_topic(
+    tmp_path: Path, node, topic: str, *options: str
+) -> Iterator[tuple[NodeProcess, Any, Path]]:
+    """A String publisher on ``topic`` and a recorder of it (with ``options``), matched."""
+    bag = tmp_path / topic.rsplit("/", 1)[-1]
+    pub = node.create_publisher(String, topic, 1000)
+    with NodeProcess("recorder", topic, "-o", str(bag), "--discovery-period", "0.2", *options) as rec:
+        _wait_recorded(rec, pub, topic)
+        yield rec, pub, bag
 
 
 @pytest.mark.parametrize("stop_signal", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
@@ -120,12 +135,7 @@ def test_refuses_to_overwrite_and_bad_arguments(tmp_path: Path) -> None:
 def test_stamps_are_arrival_times_not_take_times(tmp_path: Path, prefix: str, node) -> None:
     """Messages are taken in batches every --poll-period, but each is stamped with the
     middleware's receive time: with a 0.5 s poll, stamps still match the send times closely."""
-    bag = tmp_path / "stamps"
-    pub = node.create_publisher(String, f"{prefix}/tick", 100)
-    with NodeProcess(
-        "recorder", f"{prefix}/tick", "-o", str(bag), "--discovery-period", "0.2", "--poll-period", "0.5"
-    ) as rec:
-        _wait_recorded(rec, pub, f"{prefix}/tick")
+    with _recording_one_topic(tmp_path, node, f"{prefix}/tick", "--poll-period", "0.5") as (rec, pub, bag):
         sent_ns = []
         for i in range(40):
             sent_ns.append(time.time_ns())
@@ -133,7 +143,7 @@ def test_stamps_are_arrival_times_not_take_times(tmp_path: Path, prefix: str, no
             time.sleep(0.03)
         time.sleep(0.8)
         assert rec.stop() == 0, rec.output
-    got = _strings(read_with_mcap(bag / "stamps_0.mcap"))
+    got = _strings(read_with_mcap(bag / "tick_0.mcap"))
     assert [int(text) for _, _, text in got] == list(range(40))
     delays = [(t - s) / 1e9 for (_, t, _), s in zip(got, sent_ns, strict=True)]
     print(f"\nreceive stamp - send time with a 0.5 s poll: max {max(delays) * 1e3:.1f} ms")
@@ -226,13 +236,8 @@ def test_messages_lost_to_a_full_queue_are_reported_not_silent(tmp_path: Path, p
     metadata.yaml."""
     import yaml
 
-    bag = tmp_path / "lossy"
-    pub = node.create_publisher(String, f"{prefix}/burst", 1000)
-    with NodeProcess(
-        "recorder", f"{prefix}/burst", "-o", str(bag), "--discovery-period", "0.2",
-        "--qos-depth", "5", "--poll-period", "0.5", "--status-period", "0.2",
-    ) as rec:
-        _wait_recorded(rec, pub, f"{prefix}/burst")
+    options = ("--qos-depth", "5", "--poll-period", "0.5", "--status-period", "0.2")
+    with _recording_one_topic(tmp_path, node, f"{prefix}/burst", *options) as (rec, pub, bag):
         pub.publish(String(data="0"))  # taken alone: the publisher's sequence is then known
         rec.wait_for_output("skipped; 1 messages", timeout=30)
         for i in range(1, 300):
@@ -255,12 +260,7 @@ def test_messages_lost_to_a_full_queue_are_reported_not_silent(tmp_path: Path, p
 
 def test_messages_queued_at_the_stop_are_recorded(tmp_path: Path, prefix: str, node) -> None:
     """Stopped between two takes (a 5 s poll): what had arrived is still taken into the bag."""
-    bag = tmp_path / "tail"
-    pub = node.create_publisher(String, f"{prefix}/tail", 100)
-    with NodeProcess(
-        "recorder", f"{prefix}/tail", "-o", str(bag), "--discovery-period", "0.2", "--poll-period", "5"
-    ) as rec:
-        _wait_recorded(rec, pub, f"{prefix}/tail")
+    with _recording_one_topic(tmp_path, node, f"{prefix}/tail", "--poll-period", "5") as (rec, pub, bag):
         time.sleep(0.5)
         for i in range(50):
             pub.publish(String(data=str(i)))
