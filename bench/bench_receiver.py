@@ -21,7 +21,6 @@ import argparse
 import os
 import subprocess
 import sys
-import threading
 import time
 import uuid
 from collections.abc import Callable
@@ -90,10 +89,10 @@ class Collected:
 class Subscriber:
     def __init__(self, topic: str) -> None:
         import rclpy
-        from rclpy.executors import SingleThreadedExecutor
         from std_msgs.msg import Float64MultiArray
 
         from hri_physio_bridge.frames import msg_to_frame
+        from hri_physio_bridge.ros_tools import ExecutorThread
         from hri_physio_bridge.streamers.ros import frame_qos
 
         self.context = rclpy.Context()
@@ -111,20 +110,10 @@ class Subscriber:
             self.data.last_arrival = now
 
         self.node.create_subscription(Float64MultiArray, topic, on_msg, frame_qos())
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.running = True
-        self.thread = threading.Thread(target=self._spin, daemon=True)
-        self.thread.start()
-
-    def _spin(self) -> None:
-        while self.running:
-            self.executor.spin_once(timeout_sec=0.05)
+        self._spinner = ExecutorThread(self.node, context=self.context)
 
     def close(self) -> None:
-        self.running = False
-        self.thread.join(2)
-        self.executor.shutdown(timeout_sec=1)
+        self._spinner.close()
         self.node.destroy_node()
         import rclpy
 

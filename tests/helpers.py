@@ -87,21 +87,14 @@ class RosFrameCollector:
     """An rclpy node on its own executor thread that collects decoded frames from topics."""
 
     def __init__(self, context: object, name: str = "collector") -> None:
-        from rclpy.executors import SingleThreadedExecutor
         from rclpy.node import Node
 
+        from hri_physio_bridge.ros_tools import ExecutorThread
+
         self.node = Node(name, context=context)
-        self.executor = SingleThreadedExecutor(context=context)
-        self.executor.add_node(self.node)
         self.frames: dict[str, list] = {}
         self._lock = threading.Lock()
-        self._thread = threading.Thread(target=self._spin, daemon=True)
-        self._running = True
-        self._thread.start()
-
-    def _spin(self) -> None:
-        while self._running:
-            self.executor.spin_once(timeout_sec=0.05)
+        self._spinner = ExecutorThread(self.node, context=context)
 
     def subscribe_frames(self, topic: str) -> list:
         from std_msgs.msg import Float64MultiArray
@@ -122,9 +115,7 @@ class RosFrameCollector:
         return self.node.count_publishers(topic)
 
     def close(self) -> None:
-        self._running = False
-        self._thread.join(2.0)
-        self.executor.shutdown(timeout_sec=1.0)
+        self._spinner.close()
         self.node.destroy_node()
 
 

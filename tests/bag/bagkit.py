@@ -97,22 +97,13 @@ class RawCollector:
     """An rclpy node on its own executor thread keeping every raw message of some topics."""
 
     def __init__(self, context: Any, name: str = "bag_collector") -> None:
-        import threading
-
-        from rclpy.executors import SingleThreadedExecutor
         from rclpy.node import Node
 
-        self.node = Node(name, context=context)
-        self.executor = SingleThreadedExecutor(context=context)
-        self.executor.add_node(self.node)
-        self.messages: dict[str, list[bytes]] = {}
-        self._running = True
-        self._thread = threading.Thread(target=self._spin, daemon=True)
-        self._thread.start()
+        from hri_physio_bridge.ros_tools import ExecutorThread
 
-    def _spin(self) -> None:
-        while self._running:
-            self.executor.spin_once(timeout_sec=0.05)
+        self.node = Node(name, context=context)
+        self.messages: dict[str, list[bytes]] = {}
+        self._spinner = ExecutorThread(self.node, context=context)
 
     def subscribe(self, topic: str, msg_type: Any, qos: Any = None) -> list[bytes]:
         from rclpy.qos import QoSProfile
@@ -122,7 +113,5 @@ class RawCollector:
         return got
 
     def close(self) -> None:
-        self._running = False
-        self._thread.join(2.0)
-        self.executor.shutdown(timeout_sec=1.0)
+        self._spinner.close()
         self.node.destroy_node()

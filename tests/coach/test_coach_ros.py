@@ -20,7 +20,7 @@ from typing import Any
 import pytest
 
 from helpers import NodeProcess, wait_until
-from hri_physio_bridge.ros_tools import clock_message
+from hri_physio_bridge.ros_tools import ExecutorThread, clock_message
 
 pytestmark = pytest.mark.ros
 
@@ -85,7 +85,6 @@ class Probe:
     """Publishes /clock and HR frames; collects coach events, commands, replies and mock events."""
 
     def __init__(self, context: Any, hr_topic: str) -> None:
-        from rclpy.executors import SingleThreadedExecutor
         from rclpy.node import Node
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
         from rosgraph_msgs.msg import Clock
@@ -112,21 +111,13 @@ class Probe:
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.node.create_subscription(String, "/coach/state", self._add(self.states, True), latched)
-        self.executor = SingleThreadedExecutor(context=context)
-        self.executor.add_node(self.node)
-        self._running = True
-        self._thread = threading.Thread(target=self._spin, daemon=True)
-        self._thread.start()
+        self._spinner = ExecutorThread(self.node, context=context)
 
     def _add(self, into: list, parse: bool):
         def callback(msg: Any) -> None:
             with self.lock:
                 into.append(json.loads(msg.data) if parse else msg.data)
         return callback
-
-    def _spin(self) -> None:
-        while self._running:
-            self.executor.spin_once(timeout_sec=0.05)
 
     def publish_clock(self, t: float) -> None:
         self.clock_pub.publish(clock_message(t))
@@ -151,9 +142,7 @@ class Probe:
             return [e for e in pool if e["event"] == kind]
 
     def close(self) -> None:
-        self._running = False
-        self._thread.join(2.0)
-        self.executor.shutdown(timeout_sec=1.0)
+        self._spinner.close()
         self.node.destroy_node()
 
 

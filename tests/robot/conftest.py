@@ -16,7 +16,7 @@ from typing import Any
 import pytest
 
 from helpers import wait_until
-from hri_physio_bridge.ros_tools import clock_message
+from hri_physio_bridge.ros_tools import ExecutorThread, clock_message
 
 SIM_START = 1000.0
 
@@ -125,7 +125,6 @@ class RobotSide:
 
     def __init__(self, context: Any, mock_options: dict[str, Any],
                  controller_options: dict[str, Any]) -> None:
-        from rclpy.executors import SingleThreadedExecutor
         from rclpy.parameter import Parameter
 
         from qt_controller.nodes.mock_qt_robot import MockQtRobotNode
@@ -136,27 +135,16 @@ class RobotSide:
         self.mock = MockQtRobotNode(mock_options, context=context, parameter_overrides=sim)
         self.controller = QtControllerNode(controller_options, context=context, parameter_overrides=sim)
         self.probe = Probe(context)
-        self.executor = SingleThreadedExecutor(context=context)
-        for node in (self.mock, self.controller, self.probe.node):
-            self.executor.add_node(node)
-        self._spinning = True
-        self._thread = threading.Thread(target=self._spin, daemon=True)
-        self._thread.start()
+        self._spinner = ExecutorThread(self.mock, self.controller, self.probe.node, context=context)
         self.controller.start()
         wait_until(self.probe.connected, 20, "the probe to discover qt_controller")
         wait_until(lambda: self.mock._now() > SIM_START and self.probe.now() > SIM_START, 20, "sim time")
         for client in self.controller.robot._services.values():
             assert client.wait_available(20), f"{client.spec.name} not available"
 
-    def _spin(self) -> None:
-        while self._spinning:
-            self.executor.spin_once(timeout_sec=0.05)
-
     def close(self) -> None:
         self.controller.stop()
-        self._spinning = False
-        self._thread.join(5.0)
-        self.executor.shutdown(timeout_sec=1.0)
+        self._spinner.close(join_timeout=5.0)
         for node in (self.controller, self.mock, self.probe.node):
             node.destroy_node()
         self.clock.close()
@@ -183,24 +171,10 @@ def robot_side(ros_context: Any, tmp_path: Path) -> Iterator[RobotSide]:
 @pytest.fixture
 def wall_probe(ros_context: Any) -> Iterator[Probe]:
     """A probe on wall time, spinning on its own thread (for node subprocesses)."""
-    from rclpy.executors import SingleThreadedExecutor
-
     probe = Probe(ros_context, use_sim_time=False)
-    executor = SingleThreadedExecutor(context=ros_context)
-    executor.add_node(probe.node)
-    running = threading.Event()
-    running.set()
-
-    def spin() -> None:
-        while running.is_set():
-            executor.spin_once(timeout_sec=0.05)
-
-    thread = threading.Thread(target=spin, daemon=True)
-    thread.start()
+    spinner = ExecutorThread(probe.node, context=ros_context)
     try:
         yield probe
     finally:
-        running.clear()
-        thread.join(2.0)
-        executor.shutdown(timeout_sec=1.0)
+        spinner.close()
         probe.node.destroy_node()

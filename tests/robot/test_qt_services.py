@@ -11,6 +11,7 @@ from typing import Any
 import pytest
 
 from helpers import wait_until
+from hri_physio_bridge.ros_tools import ExecutorThread
 from qt_controller import qt_services as qs
 from qt_controller.robot_interface import Outcome
 
@@ -54,27 +55,6 @@ def test_coerce_request_checks_fields_and_types() -> None:
             qs.coerce_request(spec, request)
 
 
-class _Spinner:
-    def __init__(self, context: Any, *nodes: Any) -> None:
-        from rclpy.executors import SingleThreadedExecutor
-
-        self.executor = SingleThreadedExecutor(context=context)
-        for n in nodes:
-            self.executor.add_node(n)
-        self.running = True
-        self.thread = threading.Thread(target=self._spin, daemon=True)
-        self.thread.start()
-
-    def _spin(self) -> None:
-        while self.running:
-            self.executor.spin_once(timeout_sec=0.05)
-
-    def close(self) -> None:
-        self.running = False
-        self.thread.join(2)
-        self.executor.shutdown(timeout_sec=1)
-
-
 @pytest.mark.ros
 def test_json_request_reply_roundtrip_shared_server_and_errors(ros_context: Any) -> None:
     from rclpy.node import Node
@@ -98,7 +78,7 @@ def test_json_request_reply_roundtrip_shared_server_and_errors(ros_context: Any)
     client_node.create_subscription(String, "/qt_robot/gesture/play/reply",
                                     lambda m: raw_replies.append(json.loads(m.data)), 10)
     raw = client_node.create_publisher(String, "/qt_robot/gesture/play/request", 10)
-    spinner = _Spinner(ros_context, server_node, client_node)
+    spinner = ExecutorThread(server_node, client_node, context=ros_context)
     try:
         assert a.wait_available(20) and b.wait_available(20)
         results: dict[str, Outcome] = {}
