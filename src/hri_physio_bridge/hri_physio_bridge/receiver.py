@@ -282,7 +282,7 @@ class PhysioReceiver:
         what = "a consumer" if want == 1 else f"{want} consumers"
         self.log.info(f"waiting up to {limit:g} s for {what} on {self.sink.uri}")
         deadline = self._monotonic() + limit
-        while not self._enough_consumers(want):
+        while self.sink.consumer_count() < want:
             if self._stop.is_set():
                 self.log.info(f"stopped while waiting for {what} on {self.sink.uri}")
                 return
@@ -292,9 +292,6 @@ class PhysioReceiver:
                 return
             self._stop.wait(0.02)
         self.log.info(f"{self.sink.uri} has {what}")
-
-    def _enough_consumers(self, want: int) -> bool:
-        return self.sink.consumer_count() >= want if want > 1 else self.sink.has_consumers()
 
     def _guard(self, fn: Callable[[], None]) -> Callable[[], None]:
         def run() -> None:

@@ -182,7 +182,7 @@ def start_nodes(group: ProcessGroup, args: argparse.Namespace, echo: bool) -> Pa
     # Each receiver holds its input until all of its listeners are there, so the bag and the
     # coach (or processor) get every sample from the first: HR goes to this launcher's watcher,
     # the recorder and (strap source) the coach; ECG to the processor and the recorder.
-    recorder = 0 if args.no_record else 1
+    recorder = int(bag is not None)
     streams = [("HR", HR_TOPIC, 1, 1.0, 1 + recorder + (args.hr_source == "strap"))]
     if not args.no_ecg:
         streams.append(("ECG", ECG_TOPIC, 13, 130.0, 1 + recorder))

@@ -141,10 +141,9 @@ class RecordingSession:
         received = int(info.get("received_timestamp") or 0) if info else 0
         source = int(info.get("source_timestamp") or 0) if info else 0
         seq = int(info.get("publication_sequence_number") or 0) if info else 0
-        if seq:
-            gid = info.get("publisher_gid") if info else None
-            if gid:
-                self._check_sequence(topic, bytes(gid["data"]), seq)
+        gid = info.get("publisher_gid") if seq and info else None
+        if gid:
+            self._check_sequence(topic, bytes(gid["data"]), seq)
         self.writer.write(topic, received or self._wall_ns(), data, source, seq)
 
     def _check_sequence(self, topic: str, publisher: bytes, seq: int) -> None:
