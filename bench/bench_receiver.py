@@ -41,8 +41,9 @@ def relay_main(name: str, topic: str, frame: int) -> None:
     import rclpy
     from std_msgs.msg import Float64MultiArray
 
-    from hri_physio_bridge.frames import Frame, frame_to_msg
-    from hri_physio_bridge.streamers.ros import frame_qos
+    from hri_physio_bridge.frames import Frame
+    from hri_physio_bridge.qos import frame_qos
+    from hri_physio_bridge.ros_frames import frame_to_msg
 
     rclpy.init()
     node = rclpy.create_node("minimal_relay")
@@ -91,9 +92,9 @@ class Subscriber:
         import rclpy
         from std_msgs.msg import Float64MultiArray
 
-        from hri_physio_bridge.frames import msg_to_frame
+        from hri_physio_bridge.qos import frame_qos
+        from hri_physio_bridge.ros_frames import msg_to_frame
         from hri_physio_bridge.ros_tools import ExecutorThread
-        from hri_physio_bridge.streamers.ros import frame_qos
 
         self.context = rclpy.Context()
         rclpy.init(context=self.context)

@@ -68,7 +68,8 @@ class Stream:
         from rclpy.serialization import serialize_message
         from std_msgs.msg import String
 
-        from hri_physio_bridge.frames import Frame, frame_to_msg
+        from hri_physio_bridge.frames import Frame
+        from hri_physio_bridge.ros_frames import frame_to_msg
 
         if self.name == "strings":
             msgs = [String(data=f'{{"t": {i / self.rate:.6f}, "event": "tick {i}"}}') for i in range(1000)]

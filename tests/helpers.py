@@ -99,8 +99,8 @@ class RosFrameCollector:
     def subscribe_frames(self, topic: str) -> list:
         from std_msgs.msg import Float64MultiArray
 
-        from hri_physio_bridge.frames import msg_to_frame
-        from hri_physio_bridge.streamers.ros import frame_qos
+        from hri_physio_bridge.qos import frame_qos
+        from hri_physio_bridge.ros_frames import msg_to_frame
 
         got: list = self.frames.setdefault(topic, [])
 

@@ -22,7 +22,8 @@ import pytest
 from offline_harness import NodeSpec, OfflineHarness
 
 from helpers import NodeProcess, RosFrameCollector, concat_new_samples, wait_until
-from hri_physio_bridge.frames import Frame, msg_to_frame
+from hri_physio_bridge.frames import Frame
+from hri_physio_bridge.ros_frames import msg_to_frame
 
 pytestmark = [pytest.mark.ros, pytest.mark.lsl]
 RATE = 130.0

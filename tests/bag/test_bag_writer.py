@@ -17,7 +17,8 @@ from hri_physio_bridge.bag.msgdefs import installed_type_hash, message_definitio
 from hri_physio_bridge.bag.reader import BagReader
 from hri_physio_bridge.bag.recovery import McapScanner
 from hri_physio_bridge.bag.writer import BagWriter
-from hri_physio_bridge.frames import Frame, frame_to_msg, msg_to_frame
+from hri_physio_bridge.frames import Frame
+from hri_physio_bridge.ros_frames import frame_to_msg, msg_to_frame
 
 T0 = 1_700_000_000_000_000_000
 

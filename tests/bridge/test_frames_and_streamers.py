@@ -9,9 +9,8 @@ import numpy as np
 import pytest
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 
-from hri_physio_bridge.frames import (
-    Frame,
-    FrameFormatError,
+from hri_physio_bridge.frames import Frame, FrameFormatError
+from hri_physio_bridge.ros_frames import (
     frame_to_msg,
     marker_to_msg,
     msg_to_frame,

@@ -99,8 +99,9 @@ def test_ros_to_lsl_every_sample_once_in_order(lsl_name: str, ros_context) -> No
     from rclpy.node import Node
     from std_msgs.msg import Float64MultiArray
 
-    from hri_physio_bridge.frames import Frame, frame_to_msg
-    from hri_physio_bridge.streamers.ros import frame_qos
+    from hri_physio_bridge.frames import Frame
+    from hri_physio_bridge.qos import frame_qos
+    from hri_physio_bridge.ros_frames import frame_to_msg
 
     topic = f"/test/{lsl_name.split('/')[0]}/to_lsl"
     node = Node("pub", context=ros_context)
@@ -259,8 +260,9 @@ def test_ros_input_bad_messages_rejected_counted_and_rate_limited(lsl_name: str,
     from rclpy.node import Node
     from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-    from hri_physio_bridge.frames import Frame, frame_to_msg
-    from hri_physio_bridge.streamers.ros import frame_qos
+    from hri_physio_bridge.frames import Frame
+    from hri_physio_bridge.qos import frame_qos
+    from hri_physio_bridge.ros_frames import frame_to_msg
 
     topic = f"/test/{lsl_name.split('/')[0]}/bad_in"
     out_csv = tmp_path / "good.csv"
@@ -462,7 +464,7 @@ def test_lsl_string_markers_to_ros_json(lsl_name: str, ros_context) -> None:
     from rclpy.node import Node
     from std_msgs.msg import String
 
-    from hri_physio_bridge.streamers.ros import frame_qos
+    from hri_physio_bridge.qos import frame_qos
 
     topic = "/test/markers"
     node = Node("marker_sub", context=ros_context)

@@ -70,7 +70,8 @@ def test_invalid_configuration_is_one_clear_line(args: list[str], message: str, 
 def test_hr_frames_decode_with_optional_flag_channel() -> None:
     import numpy as np
 
-    from hri_physio_bridge.frames import Frame, frame_to_msg
+    from hri_physio_bridge.frames import Frame
+    from hri_physio_bridge.ros_frames import frame_to_msg
     from hri_physio_coach.nodes.qt_physio_coach import hr_samples
 
     one = frame_to_msg(Frame(np.array([12.5]), np.array([[131.0]]), ("hr",)))
@@ -90,7 +91,7 @@ class Probe:
         from rosgraph_msgs.msg import Clock
         from std_msgs.msg import Float64MultiArray, String
 
-        from hri_physio_bridge.streamers.ros import frame_qos
+        from hri_physio_bridge.qos import frame_qos
 
         self.node = Node("coach_test_probe", context=context)
         self.clock_pub = self.node.create_publisher(Clock, "/clock", 10)
@@ -125,7 +126,8 @@ class Probe:
     def publish_hr(self, t: float, bpm: float) -> None:
         import numpy as np
 
-        from hri_physio_bridge.frames import Frame, frame_to_msg
+        from hri_physio_bridge.frames import Frame
+        from hri_physio_bridge.ros_frames import frame_to_msg
 
         self.hr_pub.publish(frame_to_msg(Frame(np.array([t]), np.array([[bpm]]), ("hr",))))
 

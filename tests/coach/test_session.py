@@ -89,7 +89,7 @@ def test_closed_loop_session_runs_to_its_end_and_records_everything(short_sessio
     assert np.mean(moving) > np.mean(seated) + 15, (np.mean(seated), np.mean(moving))
 
     # ... and every strap HR sample reached ROS 2 once, in order, one per second of sim time.
-    from hri_physio_bridge.frames import msg_to_frame
+    from hri_physio_bridge.ros_frames import msg_to_frame
 
     hr_t = np.concatenate([msg_to_frame(m).timestamps for m in msgs["/physio/polar_h10/hr"]])
     assert np.all(np.diff(hr_t) > 0)

@@ -32,7 +32,7 @@ class Outputs:
     def __init__(self, collector: RosFrameCollector, prefix: str) -> None:
         from std_msgs.msg import String
 
-        from hri_physio_bridge.streamers.ros import frame_qos
+        from hri_physio_bridge.qos import frame_qos
 
         self.collector = collector
         self.frames = {name: collector.subscribe_frames(f"{prefix}/{name}") for name in OUTPUTS}
@@ -113,8 +113,9 @@ def publish_stream(ros_context, topic: str, t: np.ndarray, x: np.ndarray, chunks
     from rclpy.node import Node
     from std_msgs.msg import Float64MultiArray
 
-    from hri_physio_bridge.frames import Frame, frame_to_msg
-    from hri_physio_bridge.streamers.ros import frame_qos
+    from hri_physio_bridge.frames import Frame
+    from hri_physio_bridge.qos import frame_qos
+    from hri_physio_bridge.ros_frames import frame_to_msg
 
     node = Node("ecg_source", context=ros_context)
     pub = node.create_publisher(Float64MultiArray, topic, frame_qos())

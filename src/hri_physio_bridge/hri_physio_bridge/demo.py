@@ -30,8 +30,8 @@ class TopicWatcher(BackgroundNode):
     def __init__(self) -> None:
         from std_msgs.msg import Float64MultiArray
 
-        from hri_physio_bridge.frames import msg_to_frame
-        from hri_physio_bridge.streamers.ros import frame_qos
+        from hri_physio_bridge.qos import frame_qos
+        from hri_physio_bridge.ros_frames import msg_to_frame
 
         super().__init__("demo_watcher")
         self.ecg_samples = 0

@@ -1,13 +1,14 @@
-"""Frames of samples and their ROS 2 message codec.
+"""Frames of samples and the frame layout, with no ROS import.
 
 A frame is N samples x C channels with one source timestamp (LSL clock, seconds)
 per sample. On ROS 2 it travels as a ``std_msgs/Float64MultiArray`` with two
 labelled dims, ``samples`` and ``channels``; column 0 holds the timestamps and
-the ``channels`` label lists ``t,<ch1>,<ch2>...`` (DESIGN.md). ``frame_to_msg`` /
-``msg_to_frame`` are the only code that knows this layout.
+the ``channels`` label lists ``t,<ch1>,<ch2>...`` (docs/ARCHITECTURE.md).
+:func:`encode_layout` / :func:`decode_layout` are the only code that knows this layout;
+``ros_frames`` puts their result into and out of the message types.
 
 String (marker) streams travel as ``std_msgs/String`` holding one JSON object
-``{"t": <timestamp>, "data": <text>}`` per sample.
+``{"t": <timestamp>, "data": <text>}`` per sample (:func:`encode_marker`).
 """
 
 from __future__ import annotations
@@ -16,9 +17,9 @@ import json
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 
 SAMPLES_LABEL = "samples"
 CHANNELS_LABEL = "channels"
@@ -90,8 +91,16 @@ class Frame:
         )
 
 
-def frame_to_msg(frame: Frame) -> Float64MultiArray:
-    """Encode a numeric frame as a Float64MultiArray (column 0 = timestamps).
+class Dim(NamedTuple):
+    """One ``MultiArrayDimension`` of the layout."""
+
+    label: str
+    size: int
+    stride: int
+
+
+def encode_layout(frame: Frame) -> tuple[list[Dim], np.ndarray]:
+    """The two dims and the flat float64 data (column 0 = timestamps) of a numeric frame.
 
     Integer channels are carried as float64, exact up to 2**53.
     """
@@ -101,18 +110,11 @@ def frame_to_msg(frame: Frame) -> Float64MultiArray:
     table = np.empty((n, c + 1), dtype=np.float64)
     table[:, 0] = frame.timestamps
     table[:, 1:] = frame.values
-    msg = Float64MultiArray()
-    msg.layout.dim = [
-        MultiArrayDimension(label=SAMPLES_LABEL, size=n, stride=n * (c + 1)),
-        MultiArrayDimension(
-            label=CHANNELS_LABEL + ":" + ",".join((TIME_LABEL, *frame.channels)),
-            size=c + 1,
-            stride=c + 1,
-        ),
+    dims = [
+        Dim(SAMPLES_LABEL, n, n * (c + 1)),
+        Dim(CHANNELS_LABEL + ":" + ",".join((TIME_LABEL, *frame.channels)), c + 1, c + 1),
     ]
-    msg.layout.data_offset = 0
-    msg.data = table.ravel()
-    return msg
+    return dims, table.ravel()
 
 
 def _parse_channels_label(label: str, size: int) -> tuple[str, ...]:
@@ -129,49 +131,41 @@ def _parse_channels_label(label: str, size: int) -> tuple[str, ...]:
     return parts[1:]
 
 
-def msg_to_frame(msg: Float64MultiArray) -> Frame:
-    """Decode a Float64MultiArray produced by :func:`frame_to_msg`."""
-    dims = list(msg.layout.dim)
-    if len(dims) != 2 or dims[0].label != SAMPLES_LABEL:
-        labels = [d.label for d in dims]
+def decode_layout(dims: Sequence[tuple[str, int, int]], data_offset: int, data: Sequence[float]) -> Frame:
+    """The frame described by a message's dims, data offset and data (see :func:`encode_layout`)."""
+    if len(dims) != 2 or dims[0][0] != SAMPLES_LABEL:
+        labels = [d[0] for d in dims]
         raise FrameFormatError(
             f"expected 2 dims labelled '{SAMPLES_LABEL}' and '{CHANNELS_LABEL}', got {labels}"
         )
-    n, width = int(dims[0].size), int(dims[1].size)
+    n, width = int(dims[0][1]), int(dims[1][1])
     if width < 1:
         raise FrameFormatError("a frame needs at least the timestamp column")
-    channels = _parse_channels_label(dims[1].label, width)
-    offset = int(msg.layout.data_offset)
-    data = np.asarray(msg.data, dtype=np.float64)
-    if data.shape[0] - offset != n * width:
+    channels = _parse_channels_label(dims[1][0], width)
+    offset = int(data_offset)
+    values = np.asarray(data, dtype=np.float64)
+    if values.shape[0] - offset != n * width:
         raise FrameFormatError(
-            f"layout says {n} samples x {width} columns but data holds {data.shape[0] - offset} values"
+            f"layout says {n} samples x {width} columns but data holds {values.shape[0] - offset} values"
         )
-    table = data[offset:].reshape(n, width)
+    table = values[offset:].reshape(n, width)
     return Frame(table[:, 0].copy(), table[:, 1:].copy(), channels)
 
 
-def marker_to_msg(timestamp: float, data: str) -> String:
-    """Encode one string sample as a JSON ``{"t": ..., "data": ...}`` String."""
-    return String(data=json.dumps({"t": float(timestamp), "data": str(data)}))
+def encode_marker(timestamp: float, data: str) -> str:
+    """One string sample as the JSON text ``{"t": ..., "data": ...}``."""
+    return json.dumps({"t": float(timestamp), "data": str(data)})
 
 
-def msg_to_marker(msg: String) -> tuple[float, str]:
+def decode_marker(text: str) -> tuple[float, str]:
     try:
-        obj = json.loads(msg.data)
+        obj = json.loads(text)
         t = float(obj["t"])
         data = obj["data"]
     except (ValueError, TypeError, KeyError) as exc:
         raise FrameFormatError(
-            f'marker must be JSON {{"t": <seconds>, "data": <text>}}, got {msg.data[:80]!r}'
+            f'marker must be JSON {{"t": <seconds>, "data": <text>}}, got {text[:80]!r}'
         ) from exc
     if not math.isfinite(t):
         raise FrameFormatError(f"marker timestamp must be finite, got {t}")
     return t, str(data)
-
-
-def string_frame_to_msgs(frame: Frame) -> list[String]:
-    """One String message per sample of a (single-channel) string frame."""
-    if frame.num_channels != 1:
-        raise FrameFormatError(f"string streams have one channel, this frame has {frame.num_channels}")
-    return [marker_to_msg(t, v) for t, v in zip(frame.timestamps, frame.values[:, 0], strict=True)]

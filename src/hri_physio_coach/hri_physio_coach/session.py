@@ -53,8 +53,8 @@ class ClockAndWatcher(BackgroundNode):
         from rosgraph_msgs.msg import Clock
         from std_msgs.msg import Float64MultiArray, String
 
-        from hri_physio_bridge.frames import msg_to_frame
-        from hri_physio_bridge.streamers.ros import frame_qos
+        from hri_physio_bridge.qos import frame_qos
+        from hri_physio_bridge.ros_frames import msg_to_frame
 
         super().__init__("session_launcher")
         self._string_cls = String

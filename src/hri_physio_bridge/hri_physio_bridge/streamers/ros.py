@@ -14,18 +14,12 @@ from collections.abc import Callable
 import numpy as np
 from rclpy.duration import Duration
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64MultiArray, String
 
-from hri_physio_bridge.frames import (
-    Frame,
-    FrameFormatError,
-    frame_to_msg,
-    msg_to_frame,
-    msg_to_marker,
-    string_frame_to_msgs,
-)
+from hri_physio_bridge.frames import Frame, FrameFormatError
+from hri_physio_bridge.qos import frame_qos
 from hri_physio_bridge.rate_limit import RateLimitedLog
+from hri_physio_bridge.ros_frames import frame_to_msg, msg_to_frame, msg_to_marker, string_frame_to_msgs
 from hri_physio_bridge.streamers.base import (
     Streamer,
     StreamerError,
@@ -33,12 +27,6 @@ from hri_physio_bridge.streamers.base import (
     StreamSpec,
     numpy_dtype,
 )
-
-
-def frame_qos(depth: int = 1000) -> QoSProfile:
-    return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=ReliabilityPolicy.RELIABLE
-    )
 
 
 class RosStreamer(Streamer):

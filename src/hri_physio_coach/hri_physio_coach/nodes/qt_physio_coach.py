@@ -34,9 +34,10 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Float64MultiArray, String
 
-from hri_physio_bridge.frames import FrameFormatError, msg_to_frame
+from hri_physio_bridge.frames import FrameFormatError
 from hri_physio_bridge.nodes.common import install_stop_handlers, split_ros_args
-from hri_physio_bridge.streamers.ros import frame_qos
+from hri_physio_bridge.qos import frame_qos
+from hri_physio_bridge.ros_frames import msg_to_frame
 from hri_physio_coach.coach import CoachError, ExerciseCoach
 from hri_physio_coach.config import (
     SCALAR_KEYS,

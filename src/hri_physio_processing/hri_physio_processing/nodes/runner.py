@@ -18,6 +18,7 @@ from std_msgs.msg import String
 
 from hri_physio_bridge.frames import Frame
 from hri_physio_bridge.nodes.common import logic_logger
+from hri_physio_bridge.qos import frame_qos
 from hri_physio_bridge.streamers import (
     OpenCancelled,
     Streamer,
@@ -27,7 +28,6 @@ from hri_physio_bridge.streamers import (
     StreamSpec,
     create_streamer,
 )
-from hri_physio_bridge.streamers.ros import frame_qos
 from hri_physio_processing.config import ProcessorConfig
 from hri_physio_processing.features import SCALARS, SIGNAL_FEATURES
 from hri_physio_processing.processor import FrameOutput, NeurokitProcessor, Output, StatusOutput
