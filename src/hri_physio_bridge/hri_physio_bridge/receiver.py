@@ -19,10 +19,12 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
+from pydantic import field_validator, model_validator
 
+from hri_physio_bridge.config import ConfigError, NodeConfig, option
 from hri_physio_bridge.frames import Frame
 from hri_physio_bridge.rate_limit import RateLimitedLog
 from hri_physio_bridge.ring_buffer import BufferClosed, Gap, OverflowPolicy, RingBuffer
@@ -36,98 +38,71 @@ from hri_physio_bridge.streamers.base import (
     numpy_dtype,
 )
 from hri_physio_bridge.streamers.csv_stream import CsvWriter
+from hri_physio_bridge.waiting import wait_for_consumers
 
 
-class ConfigError(ValueError):
-    """A receiver option is invalid; the message names the option."""
-
-
-@dataclass
-class ReceiverConfig:
+class ReceiverConfig(NodeConfig):
     """The seed's receiver options (conf.yaml keys) plus a few of our own."""
 
-    input: str = "lsl:PolarH10/SIM0001/ECG"
-    output: str = "ros:/physio/polar_h10/ecg"
-    dtype: str = "float64"
-    sampling_rate: float = 130.0
-    input_frame: int = 32
-    output_frame: int = 1
-    num_channels: int = 1
-    sample_overlap: int = 0
-    buffer_length: int = 5000
-    log_data: bool = False
-    log_name: str = ""
-    # Ours: what a full buffer does, how long to wait for the source.
-    overflow_policy: str = "block"
-    resolve_timeout: float = 10.0
-    reconnect: bool = True
-    stream_type: str = ""
-    channel_names: list[str] = field(default_factory=list)
-    wait_for_consumers: float = 0.0
-    min_consumers: int = 1
-
-    KEYS = (
-        "input", "output", "dtype", "sampling_rate", "input_frame", "output_frame",
-        "num_channels", "sample_overlap", "buffer_length", "log_data", "log_name",
-        "overflow_policy", "resolve_timeout", "reconnect", "stream_type", "channel_names",
-        "wait_for_consumers", "min_consumers",
+    SEED_KEYS: ClassVar[tuple[str, ...]] = (
+        "input", "output", "dtype", "sampling_rate", "input_frame", "output_frame", "num_channels",
+        "sample_overlap", "buffer_length", "log_data", "log_name",
     )
 
+    input: str = option("lsl:PolarH10/SIM0001/ECG", "source stream address: lsl:<name>[?type=&source_id=], "
+                        "ros:/<topic>, csv:<file>[?rate=]", min_length=1)
+    output: str = option("ros:/physio/polar_h10/ecg", "destination stream address (same schemes)",
+                         min_length=1)
+    dtype: str = option("float64", "channel format: float64|float32|int64|int32|int16|int8|string "
+                        "(aliases: double, float, char...)")
+    sampling_rate: float = option(130.0, "nominal rate (0 = irregular); checked against the input's "
+                                  "declared and measured rate, used for gap detection and LSL outputs",
+                                  unit="Hz", ge=0)
+    input_frame: int = option(32, "largest chunk pulled from the input at once", unit="samples", ge=1)
+    output_frame: int = option(1, "samples per published frame", unit="samples", ge=1)
+    num_channels: int = option(1, "channels per sample (the input must match)", ge=1)
+    sample_overlap: int = option(0, "samples each frame shares with the previous one (sliding window)",
+                                 unit="samples", ge=0)
+    buffer_length: int = option(5000, "ring buffer capacity", unit="samples", ge=1)
+    log_data: bool = option(False, "write every received sample to a CSV log before buffering it")
+    log_name: str = option("", "CSV log path (default logs/<stream>_<time>.csv); never overwritten")
+    overflow_policy: str = option("block", "full buffer: block (wait, lose nothing) or drop_oldest "
+                                  "(drop, report a gap)")
+    resolve_timeout: float = option(10.0, "how long to wait for the input stream to appear", unit="s", ge=0)
+    reconnect: bool = option(True, "when the input is lost, wait for it to come back (false: flush and exit)")
+    stream_type: str = option("", "stream type declared on LSL outputs (default: the input's)")
+    channel_names: list[str] = option([], "comma-separated channel labels (default: the input's)")
+    wait_for_consumers: float = option(0.0, "how long to wait for a listener on the output before reading "
+                                       "the input (0 = no wait)", unit="s", ge=0)
+    min_consumers: int = option(1, "with wait_for_consumers: how many listeners to wait for, e.g. 2 for a "
+                                "processor and a recorder (ros: outputs only)", ge=1)
+    interactive: bool = option(False, "text console on stdin: status, pause, resume, quit", switch=True)
+    status_period: float = option(5.0, "time between progress reports", unit="s", gt=0)
+
+    @field_validator("dtype")
     @classmethod
-    def from_mapping(cls, values: dict[str, Any], source: str = "configuration") -> ReceiverConfig:
-        unknown = sorted(set(values) - set(cls.KEYS))
-        if unknown:
-            raise ConfigError(f"{source}: unknown option(s) {unknown}; known: {list(cls.KEYS)}")
-        cfg = cls()
-        for key, value in values.items():
-            setattr(cfg, key, value)
-        cfg.validate(source)
-        return cfg
+    def _dtype(cls, value: str) -> str:
+        return canonical_dtype(value)
 
-    def validate(self, source: str = "configuration") -> None:
-        def fail(key: str, why: str) -> None:
-            raise ConfigError(f"{source}: {key} {why} (got {getattr(self, key)!r})")
+    @field_validator("overflow_policy")
+    @classmethod
+    def _policy(cls, value: str) -> str:
+        return OverflowPolicy.parse(value).value
 
-        for key in ("input", "output"):
-            if not isinstance(getattr(self, key), str) or not getattr(self, key):
-                fail(key, "must be a stream address such as lsl:<name>, ros:/<topic> or csv:<file>")
-        try:
-            self.dtype = canonical_dtype(self.dtype)
-        except ValueError as exc:
-            raise ConfigError(f"{source}: dtype: {exc}") from None
-        for key in ("input_frame", "output_frame", "num_channels", "buffer_length", "min_consumers"):
-            value = getattr(self, key)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                fail(key, "must be a whole number >= 1")
-        if isinstance(self.sample_overlap, bool) or not isinstance(self.sample_overlap, int):
-            fail("sample_overlap", "must be a whole number")
-        if not 0 <= self.sample_overlap < self.output_frame:
-            fail("sample_overlap", f"must be >= 0 and < output_frame ({self.output_frame})")
+    @model_validator(mode="after")
+    def _consistent(self) -> ReceiverConfig:
+        if self.sample_overlap >= self.output_frame:
+            raise ValueError(f"sample_overlap must be < output_frame ({self.output_frame}), "
+                             f"got {self.sample_overlap}")
         if self.buffer_length < self.output_frame:
-            fail("buffer_length", f"must hold at least one output frame ({self.output_frame} samples)")
-        try:
-            self.sampling_rate = float(self.sampling_rate)
-        except (TypeError, ValueError):
-            fail("sampling_rate", "must be a number (Hz; 0 = irregular)")
-        if not math.isfinite(self.sampling_rate) or self.sampling_rate < 0:
-            fail("sampling_rate", "must be >= 0 Hz (0 = irregular)")
-        try:
-            OverflowPolicy.parse(self.overflow_policy)
-        except ValueError as exc:
-            raise ConfigError(f"{source}: overflow_policy: {exc}") from None
-        if not isinstance(self.log_data, bool):
-            fail("log_data", "must be true or false")
-        for key in ("resolve_timeout", "wait_for_consumers"):
-            try:
-                setattr(self, key, float(getattr(self, key)))
-            except (TypeError, ValueError):
-                fail(key, "must be a number of seconds")
-            if getattr(self, key) < 0:
-                fail(key, "must be >= 0 seconds")
+            raise ValueError(f"buffer_length must hold at least one output frame ({self.output_frame} "
+                             f"samples), got {self.buffer_length}")
         if self.min_consumers > 1 and self.wait_for_consumers <= 0:
-            fail("min_consumers", "only counts while waiting: set wait_for_consumers > 0 too")
+            raise ValueError("min_consumers only counts while waiting: set wait_for_consumers > 0 too")
         if self.channel_names and len(self.channel_names) != self.num_channels:
-            fail("channel_names", f"must list num_channels ({self.num_channels}) names")
+            raise ValueError(f"channel_names must list num_channels ({self.num_channels}) names, "
+                             f"got {len(self.channel_names)}")
+        return self
 
     def expected_spec(self) -> StreamSpec:
         return StreamSpec(
@@ -187,7 +162,6 @@ class PhysioReceiver:
         monotonic: Callable[[], float] = time.monotonic,
         log_writer_factory: Callable[[StreamSpec], CsvWriter] | None = None,
     ) -> None:
-        config.validate()
         if config.min_consumers > 1 and not sink.counts_consumers:
             raise ConfigError(
                 f"min_consumers {config.min_consumers}: output {sink.uri} cannot count its listeners "
@@ -276,22 +250,9 @@ class PhysioReceiver:
         """Optionally hold the input until the output has ``min_consumers`` listeners (log
         replays; a processor and a recorder that must both see the first sample). The input is
         open meanwhile, so a live source's samples wait in its queue."""
-        limit, want = self.config.wait_for_consumers, self.config.min_consumers
-        if limit <= 0:
-            return
-        what = "a consumer" if want == 1 else f"{want} consumers"
-        self.log.info(f"waiting up to {limit:g} s for {what} on {self.sink.uri}")
-        deadline = self._monotonic() + limit
-        while self.sink.consumer_count() < want:
-            if self._stop.is_set():
-                self.log.info(f"stopped while waiting for {what} on {self.sink.uri}")
-                return
-            if self._monotonic() >= deadline:
-                have = f"only {self.sink.consumer_count()} of {want} consumers" if want > 1 else "no consumer"
-                self.log.warning(f"{have} on {self.sink.uri} after {limit:g} s; starting anyway")
-                return
-            self._stop.wait(0.02)
-        self.log.info(f"{self.sink.uri} has {what}")
+        cfg = self.config
+        wait_for_consumers(self.sink.consumer_count, cfg.min_consumers, cfg.wait_for_consumers,
+                           what=self.sink.uri, log=self.log, clock=self._monotonic, stop=self._stop)
 
     def _guard(self, fn: Callable[[], None]) -> Callable[[], None]:
         def run() -> None:
