@@ -23,7 +23,7 @@ import sys
 import threading
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, NoReturn, TypeVar
 
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
@@ -162,13 +162,20 @@ def logic_logger(name: str, ros_logger: Any) -> logging.Logger:
 
 # ----------------------------------------------------------------------------------------------
 # Command line
+class OneLineErrorParser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line (``<prog>: error: ...``, status 2), no usage dump."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
 def build_parser(prog: str, config_cls: type[NodeConfig], description: str | None = None,
                  epilog: str | None = None, extra_arguments: Callable[[argparse.ArgumentParser], None]
                  | None = None, default_conf: Path | None = None) -> argparse.ArgumentParser:
     """The node's parser: ``--conf``, the model's options, and any ``extra_arguments``."""
     seed_keys = ", ".join(config_cls.SEED_KEYS)
     seed = f" The seed's keys ({seed_keys}) are accepted too." if seed_keys else ""
-    parser = argparse.ArgumentParser(
+    parser = OneLineErrorParser(
         prog=prog, description=description, formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog=(epilog + "\n\n" if epilog else "")
         + "Precedence: defaults < --conf file < command-line options < --ros-args parameters "
@@ -179,7 +186,9 @@ def build_parser(prog: str, config_cls: type[NodeConfig], description: str | Non
                         help=f"YAML file with the options below, flat or a ROS params file{default}.{seed}")
     if extra_arguments is not None:
         extra_arguments(parser)
-    add_config_arguments(parser, config_cls)
+    # An option that extra_arguments wrote its own way (a short flag, several values) keeps its
+    # dest, so the model still validates it; it is not added a second time.
+    add_config_arguments(parser, config_cls, skip={action.dest for action in parser._actions})
     return parser
 
 
@@ -217,6 +226,11 @@ def _rcl_message(exc: Exception) -> str:
     return str(exc).split(", at /")[0].strip()
 
 
+def _one_line(exc: Exception) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
 def fail(prog: str, message: str) -> int:
     print(f"{prog}: error: {message}", file=sys.stderr, flush=True)
     return 2
@@ -233,12 +247,16 @@ def run_node(
     extra_arguments: Callable[[argparse.ArgumentParser], None] | None = None,
     default_conf: Path | None = None,
     startup_errors: tuple[type[Exception], ...] = (),
+    offline: Callable[[C, argparse.Namespace], int | None] | None = None,
 ) -> int:
     """Parse, validate, init, build, spin, stop: the life of one node process. Returns the exit status.
 
     ``make_node(config, args)`` builds the node from the options resolved so far (it should call
     :meth:`ManagedNode.declare_config`). Exceptions in ``startup_errors`` raised while building
     are reported like configuration errors (one line, status 2).
+
+    ``offline(config, args)``, if given, runs before ROS starts: a mode that needs no ROS
+    (``replayer --info``, ``recorder --repair``) returns its exit status there; None goes on.
     """
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser(prog, config_cls, description, epilog, extra_arguments, default_conf)
@@ -254,6 +272,13 @@ def run_node(
         config = resolve_options(prog, config_cls, args, default_conf)
     except ConfigError as exc:
         return fail(prog, str(exc))
+    if offline is not None:
+        try:
+            code = offline(config, args)
+        except (ConfigError, *startup_errors) as exc:
+            return fail(prog, _one_line(exc))
+        if code is not None:
+            return code
 
     try:
         rclpy.init(args=[prog, *argv], signal_handler_options=SignalHandlerOptions.NO)
@@ -265,7 +290,7 @@ def run_node(
         try:
             node = make_node(config, args)
         except (ConfigError, ParameterException, NameValidationException, *startup_errors) as exc:
-            return fail(prog, str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__)
+            return fail(prog, _one_line(exc))
         stop = install_stop_handlers(node.on_stop)
         spinner = ExecutorThread(node)
         return node.run(stop)
