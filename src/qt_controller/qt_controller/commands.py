@@ -1,4 +1,10 @@
-"""The text command protocol of /QtController/input: parse a line into a typed command.
+"""The text command protocol of /QtController/input: typed commands to lines and back.
+
+:func:`parse_command` reads a line into a command dataclass; every dataclass writes itself
+back with ``to_line()``, so whoever sends commands (the coach) builds them typed and the two
+directions cannot drift: ``parse_command(c.to_line()) == c`` for every valid command, and
+``to_line()`` raises :class:`ParseError` for a command the protocol cannot carry (a gesture
+speed out of range, a name with spaces, ...).
 
 Command words and keys are case-insensitive (``set speechConfig 140 80`` works: the seed
 lower-cased the line and then compared it with "speechConfig", so that command never
@@ -28,9 +34,29 @@ class ParseError(ValueError):
     """A command line that is not a valid command; the message says why."""
 
 
+def _num(value: float, decimals: int = 2) -> str:
+    """A number as a short line token (``0.95``, ``0.50``) that reads back as exactly ``value``."""
+    text = f"{value:.{decimals}f}"
+    return text if float(text) == value else repr(float(value))
+
+
+def _checked(command: object, line: str) -> str:
+    """``line`` if it reads back as ``command``; :class:`ParseError` otherwise."""
+    try:
+        back = parse_command(line)
+    except ParseError as exc:
+        raise ParseError(f"{command!r} cannot be sent as a command line: {exc}") from None
+    if back != command:
+        raise ParseError(f"{command!r} cannot be sent as a command line: {line!r} reads back as {back!r}")
+    return line
+
+
 @dataclass(frozen=True)
 class SetSpeech:
     text: str
+
+    def to_line(self) -> str:
+        return _checked(self, f"set speech {self.text}")
 
 
 @dataclass(frozen=True)
@@ -38,10 +64,16 @@ class SetSpeechConfig:
     pitch: int
     speed: int
 
+    def to_line(self) -> str:
+        return _checked(self, f"set speechconfig {self.pitch} {self.speed}")
+
 
 @dataclass(frozen=True)
 class SetEmotion:
     name: str
+
+    def to_line(self) -> str:
+        return _checked(self, f"set emotion {self.name}")
 
 
 @dataclass(frozen=True)
@@ -49,20 +81,32 @@ class SetGesture:
     name: str
     speed: float = 1.0
 
+    def to_line(self) -> str:
+        return _checked(self, f"set gesture {self.name} {_num(self.speed)}")
+
 
 @dataclass(frozen=True)
 class SetAudio:
     file: str
+
+    def to_line(self) -> str:
+        return _checked(self, f"set audio {self.file}")
 
 
 @dataclass(frozen=True)
 class SetVideo:
     file: str
 
+    def to_line(self) -> str:
+        return _checked(self, f"set video {self.file}")
+
 
 @dataclass(frozen=True)
 class SetVolume:
     percent: int
+
+    def to_line(self) -> str:
+        return _checked(self, f"set volume {self.percent}")
 
 
 @dataclass(frozen=True)
@@ -70,17 +114,26 @@ class SetState:
     part: str
     degrees: tuple[float, ...]
 
+    def to_line(self) -> str:
+        return _checked(self, " ".join(["set state", self.part, *(_num(d) for d in self.degrees)]))
+
 
 @dataclass(frozen=True)
 class SetVelocity:
     part: str
     percent: float
 
+    def to_line(self) -> str:
+        return _checked(self, f"set velocity {self.part} {_num(self.percent)}")
+
 
 @dataclass(frozen=True)
 class SetVibration:
     intensity: int
     seconds: float
+
+    def to_line(self) -> str:
+        return _checked(self, f"set vibration {self.intensity} {_num(self.seconds)}")
 
 
 @dataclass(frozen=True)
@@ -89,30 +142,42 @@ class SetLights:
     green: int
     blue: int
 
+    def to_line(self) -> str:
+        return _checked(self, f"set lights {self.red} {self.green} {self.blue}")
+
 
 @dataclass(frozen=True)
 class GetState:
     part: str
+
+    def to_line(self) -> str:
+        return _checked(self, f"get state {self.part}")
 
 
 @dataclass(frozen=True)
 class GetVelocity:
     part: str
 
+    def to_line(self) -> str:
+        return _checked(self, f"get velocity {self.part}")
+
 
 @dataclass(frozen=True)
 class GetEmotion:
-    pass
+    def to_line(self) -> str:
+        return "get emotion"
 
 
 @dataclass(frozen=True)
 class Help:
-    pass
+    def to_line(self) -> str:
+        return "help"
 
 
 @dataclass(frozen=True)
 class Exit:
-    pass
+    def to_line(self) -> str:
+        return "exit"
 
 
 Command = (
