@@ -23,6 +23,11 @@ setup(
         "console_scripts": [
             "physio_receiver = hri_physio_bridge.nodes.physio_receiver:main",
             "physio_simulator = hri_physio_bridge.nodes.physio_simulator:main",
+            "polar_streamer = hri_physio_bridge.nodes.polar_streamer:main",
+            "physio_recorder = hri_physio_bridge.nodes.recorder:main",
+            "physio_replayer = hri_physio_bridge.nodes.replayer:main",
+            "physio_bridge_demo = hri_physio_bridge.demo:main",
+            # The earlier names, kept working: users and scripts already type them.
             "recorder = hri_physio_bridge.nodes.recorder:main",
             "replayer = hri_physio_bridge.nodes.replayer:main",
             "hri_physio_demo = hri_physio_bridge.demo:main",

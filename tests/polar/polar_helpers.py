@@ -1,0 +1,86 @@
+"""Test helper: running a PolarSession against fake devices in virtual time."""
+
+from __future__ import annotations
+
+import asyncio
+import random
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from hri_physio_bridge.polar.config import PolarConfig
+from hri_physio_bridge.polar.fake import FakeClock, FakePolarDevice, FakeScanner, fake_client_factory
+from hri_physio_bridge.polar.output import MemorySink
+from hri_physio_bridge.polar.session import PolarSession
+
+
+@dataclass
+class Run:
+    status: int
+    session: PolarSession
+    sink: Any
+    devices: list[FakePolarDevice]
+    events: list[dict[str, Any]] = field(default_factory=list)
+    sleeps: list[float] = field(default_factory=list)
+
+    def of(self, event: str) -> list[dict[str, Any]]:
+        return [e for e in self.events if e["event"] == event]
+
+    @property
+    def states(self) -> list[str]:
+        return [e["state"] for e in self.of("state")]
+
+
+def run_session(
+    devices: list[FakePolarDevice],
+    clock: FakeClock,
+    sink: Any | None = None,
+    *,
+    stop_when: Callable[[PolarSession, list[dict[str, Any]]], bool] | None = None,
+    max_steps: int = 2_000_000,
+    **options: Any,
+) -> Run:
+    """Run a session until ``stop_when`` holds (default: the first device's timeline is played)."""
+    config = PolarConfig(**options)
+    sink = sink if sink is not None else MemorySink()
+    sleeps: list[float] = []
+
+    async def sleep(seconds: float) -> None:
+        sleeps.append(seconds)
+        await clock.sleep(seconds)
+
+    async def main() -> Run:
+        session = PolarSession(
+            config,
+            FakeScanner(devices, clock),
+            fake_client_factory,
+            sink,
+            clock=clock,
+            sleep=sleep,
+            rng=random.Random(7),
+        )
+        events: list[dict[str, Any]] = []
+
+        def on_event(event: dict[str, Any]) -> None:
+            events.append(event)
+            if event["event"] == "state" and event.get("state") == "streaming":
+                for device in devices:
+                    if device.connected:
+                        device.release()
+
+        session.listeners.append(on_event)
+        stop = asyncio.Event()
+        task = asyncio.ensure_future(session.run(stop))
+        done = stop_when or (lambda _s, _e: devices[0].finished)
+        steps = 0
+        while not task.done() and not done(session, events):
+            await asyncio.sleep(0)
+            steps += 1
+            assert steps < max_steps, (
+                f"session did not reach the end; state {session.state}, events {events[-5:]}"
+            )
+        stop.set()
+        status = await task
+        return Run(status, session, sink, devices, events, sleeps)
+
+    return asyncio.run(main())
