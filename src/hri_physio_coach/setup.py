@@ -26,6 +26,7 @@ setup(
             "qt_physio_coach = hri_physio_coach.nodes.qt_physio_coach:main",
             "simulated_participant = hri_physio_coach.nodes.simulated_participant:main",
             "hri_physio_session = hri_physio_coach.session:main",
+            "hri_physio_report = hri_physio_coach.report.cli:main",
         ],
     },
 )
