@@ -18,7 +18,7 @@ from test_node import Outputs
 from helpers import NodeProcess, RosFrameCollector, wait_until
 from proc_helpers import match_beats
 
-pytestmark = [pytest.mark.ros]
+pytestmark = [pytest.mark.integration, pytest.mark.ros]
 FS = 130
 
 
@@ -38,7 +38,8 @@ def test_mitdb_through_receiver_and_processor(mitdb, collector, lsl_name: str, t
     out = Outputs(collector, topic)
     with NodeProcess("neurokit_processor", "--input", f"ros:{topic}", "--window-seconds", "60",
                      "--hop-seconds", "5", "--quality-method", "none", "--wait-for-consumers", "30") as proc:
-        proc.wait_for_output("every output has a consumer", 40)
+        wait_until(lambda: collector.node.count_subscribers(topic) > 0, 60,  # every output has a consumer
+                   lambda: f"the processor's subscription:\n{proc.output}")
         with NodeProcess("physio_receiver", "--input", f"csv:{log}?rate=0", "--output", f"ros:{topic}",
                          "--output-frame", "1300", "--input-frame", "1300",
                          "--wait-for-consumers", "30") as rx:
@@ -69,7 +70,8 @@ def test_simulator_receiver_processor_chain(collector, lsl_name: str) -> None:
     stream = f"{lsl_name}/PolarH10/SIM0001/ECG"
     with NodeProcess("neurokit_processor", "--input", f"ros:{topic}", "--window-seconds", "8",
                      "--hop-seconds", "4", "--min-window-seconds", "4", "--wait-for-consumers", "30") as proc:
-        proc.wait_for_output("every output has a consumer", 40)
+        wait_until(lambda: collector.node.count_subscribers(topic) > 0, 60,
+                   lambda: f"the processor's subscription:\n{proc.output}")
         with NodeProcess("physio_receiver", "--input", f"lsl:{stream}", "--output", f"ros:{topic}",
                          "--output-frame", "13", "--wait-for-consumers", "30") as rx, NodeProcess(
             "physio_simulator", "--seconds", "22", "--signals", "ecg", "--bpm", "70",

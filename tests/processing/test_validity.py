@@ -9,7 +9,8 @@ import neurokit2 as nk
 import numpy as np
 import pytest
 
-from hri_physio_processing.config import ConfigError, ProcessorConfig
+from hri_physio_bridge.config import ConfigError
+from hri_physio_processing.config import ProcessorConfig
 from hri_physio_processing.features import FeatureSettings, extract
 from hri_physio_processing.signal_checks import check_values, longest_run
 from proc_helpers import frames_of, random_chunks, run_processor, statuses
@@ -114,6 +115,19 @@ def test_gap_restarts_windows_and_is_reported(mitdb) -> None:
     np.testing.assert_array_equal(clean_t, t)
 
 
+def test_backward_clock_jump_restarts_windows_but_is_not_a_gap(mitdb) -> None:
+    n = 70 * FS
+    t = np.arange(n) / FS
+    t[40 * FS :] -= 5.0  # the source clock steps 5 s back at 40 s: nothing is missing
+    proc, out = _run(mitdb.x[:n], t)
+    (jump,) = statuses(out, "discontinuity")
+    assert (jump["gaps"], jump["missing_samples"], jump["backward_steps"]) == (0, 0, 1)
+    assert proc.stats.gaps == 0 and proc.stats.clock_jumps == 1
+    assert {st["window"]["segment"] for st in statuses(out)} == {0, 1}
+    clean_t = np.concatenate([f.timestamps for f in frames_of(out, "clean")])
+    np.testing.assert_array_equal(clean_t, t)  # every sample still published once
+
+
 def test_wrong_sampling_rate_is_flagged(mitdb) -> None:
     x = mitdb.x[: 40 * FS]
     t = np.arange(x.shape[0]) / 100.0  # really 100 Hz timestamps, configured 130 Hz
@@ -171,7 +185,13 @@ def test_clean_ecg_is_not_flagged() -> None:
     ({"hop_seconds": 90}, "hop_seconds"),
     ({"hop_seconds": 0}, "hop_seconds"),
     ({"sampling_rate": -1}, "sampling_rate"),
-    ({"window_seconds": "long"}, "window_seconds must be float"),
+    ({"window_seconds": "long"}, "window_seconds"),
+    ({"min_beats": 2.5}, "min_beats"),
+    ({"lsl_output": "maybe"}, "lsl_output"),
+    ({"sampling_rate": "fast", "buffer": 100}, "sampling_rate"),
+    ({"input": "ros:bad"}, "must be absolute"),
+    ({"input": "lsl:X"}, "output_prefix is required"),
+    ({"input": "nope:X", "output_prefix": "/x"}, "unknown stream scheme"),
     ({"quality_method": "best"}, "quality_method"),
     ({"min_hr": 200, "max_hr": 100}, "min_hr"),
     ({"channel": 2}, "channel"),
@@ -188,12 +208,13 @@ def test_bad_configuration_is_refused_clearly(values: dict, match: str) -> None:
 
 
 def test_seed_keys_are_translated() -> None:
-    cfg = ProcessorConfig.from_mapping({"name": "neurokitProcessor", "input": "/stream", "buffer": 7800,
-                                        "window": 7150, "verbose": True})
+    seed = {"name": "neurokitProcessor", "input": "/stream", "buffer": 7800, "window": 7150, "verbose": True}
+    with pytest.raises(ConfigError, match="output_prefix is required"):  # an LSL input: say where to publish
+        ProcessorConfig.from_mapping(seed)
+    cfg = ProcessorConfig.from_mapping({**seed, "output_prefix": "/physio/seed/ecg/"})
     assert cfg.input == "lsl:/stream" and cfg.lsl_prefix == "/neurokitProcessor" and cfg.verbose
     assert cfg.window_samples == 7800 and cfg.hop_samples == 650
-    with pytest.raises(ConfigError, match="output_prefix is required"):
-        cfg.resolved_output_prefix()
+    assert cfg.resolved_output_prefix() == "/physio/seed/ecg"
     assert ProcessorConfig().resolved_output_prefix() == "/physio/polar_h10/ecg"
 
 
@@ -203,5 +224,5 @@ def test_shipped_config_file_holds_the_defaults() -> None:
     package = Path(__file__).resolve().parents[2] / "src" / "hri_physio_processing"
     path = package / "config" / "neurokit_processor.yaml"
     values = yaml.safe_load(path.read_text())
-    assert set(values) == set(ProcessorConfig.KEYS)
+    assert set(values) == set(ProcessorConfig.model_fields)
     assert ProcessorConfig.from_mapping(values) == ProcessorConfig()

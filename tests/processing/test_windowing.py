@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hri_physio_processing.windowing import Discarded, Gap, Window, WindowAccumulator
+from hri_physio_bridge.ring_buffer import Gap
+from hri_physio_processing.windowing import ClockJump, Discarded, Window, WindowAccumulator
 from proc_helpers import random_chunks
 
 FS = 10.0
@@ -75,7 +76,8 @@ def test_gap_cuts_the_stream_into_segments() -> None:
     gap_at = kinds.index("Gap")
     gap = events[gap_at]
     assert gap.t_before == pytest.approx(3.2) and gap.t_after == pytest.approx(3.8)
-    assert gap.missing_samples == 5 and gap.kind == "gap"
+    assert gap.count == 5  # the bridge's one Gap type: the missing samples and their estimated times
+    assert gap.first_t == pytest.approx(3.3) and gap.last_t == pytest.approx(3.7)
     before = [e for e in events[:gap_at] if isinstance(e, Window)]
     after = [e for e in events[gap_at:] if isinstance(e, Window)]
     assert all(w.t_end <= 3.2 + 1e-9 for w in before)
@@ -88,12 +90,11 @@ def test_gap_cuts_the_stream_into_segments() -> None:
         np.testing.assert_allclose(np.diff(w.timestamps), 1 / FS)
 
 
-def test_backward_and_duplicate_timestamps_cut_too() -> None:
+def test_backward_and_duplicate_timestamps_cut_too_as_clock_jumps_not_gaps() -> None:
     t = np.array([0.0, 0.1, 0.2, 0.2, 0.3, 0.1, 0.2])
     events = WindowAccumulator(2, 1, FS).push(t, np.zeros(7))
-    gaps = [e for e in events if isinstance(e, Gap)]
-    assert [g.kind for g in gaps] == ["backward", "backward"]
-    assert gaps[0].missing_samples == 0
+    assert not [e for e in events if isinstance(e, Gap)]  # nothing is missing
+    assert [e for e in events if isinstance(e, ClockJump)] == [ClockJump(0.2, 0.2), ClockJump(0.3, 0.1)]
 
 
 def test_short_segments_are_discarded_and_reported() -> None:

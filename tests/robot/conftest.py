@@ -60,6 +60,9 @@ class Probe:
         from sensor_msgs.msg import JointState
         from std_msgs.msg import String
 
+        from hri_physio_bridge import topics
+        from hri_physio_bridge.qos import command_qos, event_qos
+
         self._string = String
         self.node = Node("test_probe", context=context,
                          parameter_overrides=[Parameter("use_sim_time", Parameter.Type.BOOL, use_sim_time)])
@@ -67,10 +70,12 @@ class Probe:
         self.replies: list[dict[str, Any]] = []
         self.events: list[dict[str, Any]] = []
         self.joints: list[tuple[float, dict[str, float]]] = []
-        self.input = self.node.create_publisher(String, "/QtController/input", 50)
-        self.output_sub = self.node.create_subscription(String, "/QtController/output", self._on_reply, 50)
-        self.events_sub = self.node.create_subscription(String, "/qt_robot/mock/events", self._on_event, 200)
-        self.node.create_subscription(JointState, "/qt_robot/joints/state", self._on_joints, 100)
+        self.input = self.node.create_publisher(String, topics.QT_COMMANDS, command_qos())
+        self.output_sub = self.node.create_subscription(String, topics.QT_REPLIES, self._on_reply,
+                                                        command_qos())
+        self.events_sub = self.node.create_subscription(String, topics.QT_MOCK_EVENTS, self._on_event,
+                                                        event_qos())
+        self.node.create_subscription(JointState, topics.QT_JOINT_STATE, self._on_joints, 100)
 
     def now(self) -> float:
         return self.node.get_clock().now().nanoseconds * 1e-9
@@ -127,23 +132,29 @@ class RobotSide:
                  controller_options: dict[str, Any]) -> None:
         from rclpy.parameter import Parameter
 
+        from qt_controller.config import MockQtRobotConfig, QtControllerConfig
         from qt_controller.nodes.mock_qt_robot import MockQtRobotNode
         from qt_controller.nodes.qt_controller import QtControllerNode
 
         sim = [Parameter("use_sim_time", Parameter.Type.BOOL, True)]
         self.clock = ClockDriver(context)
-        self.mock = MockQtRobotNode(mock_options, context=context, parameter_overrides=sim)
-        self.controller = QtControllerNode(controller_options, context=context, parameter_overrides=sim)
+        self.mock = MockQtRobotNode(MockQtRobotConfig.from_mapping(mock_options), context=context,
+                                    parameter_overrides=sim)
+        self.controller = QtControllerNode(QtControllerConfig.from_mapping(controller_options),
+                                           context=context, parameter_overrides=sim)
         self.probe = Probe(context)
         self._spinner = ExecutorThread(self.mock, self.controller, self.probe.node, context=context)
-        self.controller.start()
+        self.stop = threading.Event()
+        self.controller.start(self.stop)
         wait_until(self.probe.connected, 20, "the probe to discover qt_controller")
         wait_until(lambda: self.mock._now() > SIM_START and self.probe.now() > SIM_START, 20, "sim time")
         for client in self.controller.robot._services.values():
             assert client.wait_available(20), f"{client.spec.name} not available"
 
     def close(self) -> None:
-        self.controller.stop()
+        self.stop.set()
+        self.controller.join()
+        self.controller.close()
         self._spinner.close(join_timeout=5.0)
         for node in (self.controller, self.mock, self.probe.node):
             node.destroy_node()

@@ -13,7 +13,7 @@ import pytest
 
 from helpers import NodeProcess, wait_until
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.integration, pytest.mark.ros]
 
 BIN = Path(sys.prefix) / "bin"
 CONFIG = Path(__file__).resolve().parents[2] / "src" / "qt_controller" / "config"
@@ -27,41 +27,56 @@ def run(script: str, *args: str, timeout: float = 30) -> subprocess.CompletedPro
 def test_help() -> None:
     c = run("qt_controller", "--help")
     assert c.returncode == 0 and "set gesture <name> [<speed>]" in c.stdout and "--interactive" in c.stdout
+    assert "--allow-remote-exit" in c.stdout and "--command-queue-limit" in c.stdout
     m = run("mock_qt_robot", "--help")
-    assert m.returncode == 0 and "--gesture-dir" in m.stdout
+    assert m.returncode == 0 and "--gesture-dir" in m.stdout and "--joint-state-rate" in m.stdout
 
 
 @pytest.mark.parametrize(
     "script,args,fragment",
     [
-        ("qt_controller", ["--conf", "/nonexistent/qt.yaml"],
-         "configuration file /nonexistent/qt.yaml does not exist"),
-        ("qt_controller", ["--ros-args", "-p", "speech_channel:=shout"], "speech_channel must be one of"),
+        ("qt_controller", ["--conf", "/nonexistent/qt.yaml"], "/nonexistent/qt.yaml does not exist"),
+        ("qt_controller", ["--ros-args", "--params-file", "/nonexistent/qt.yaml"], "/nonexistent/qt.yaml"),
+        ("qt_controller", ["--ros-args", "-p", "speech_channel:=shout"], "speech_channel"),
         ("qt_controller", ["--ros-args", "-p", "joint_limits:=HeadYaw:9"], "must look like Joint:min:max"),
+        ("qt_controller", ["--ros-args", "-p", "service_timeout:=abc"], "service_timeout"),
+        ("qt_controller", ["--ros-args", "-p", "allow_remote_exit:=maybe"], "allow_remote_exit"),
+        ("qt_controller", ["--ros-args", "-p", "colour:=red"], "colour"),
+        ("qt_controller", ["--command-queue-limit", "0"], "command_queue_limit"),
+        ("qt_controller", ["--discovery-timeout", "-1"], "discovery_timeout"),
         ("mock_qt_robot", ["--gesture-dir", "/nonexistent/gestures"],
          "gesture directory /nonexistent/gestures does not exist"),
-        ("mock_qt_robot", ["--ros-args", "-p", "emotion_seconds:=0.0"], "emotion_seconds must be a positive"),
+        ("mock_qt_robot", ["--ros-args", "-p", "emotion_seconds:=0.0"], "emotion_seconds"),
+        ("mock_qt_robot", ["--ros-args", "-p", "joint_state_rate:=fast"], "joint_state_rate"),
+        ("mock_qt_robot", ["--ros-args", "-p", "gesture_busy_policy:=wait"], "gesture_busy_policy"),
+        ("mock_qt_robot", ["--default-volume", "101"], "default_volume"),
+        ("mock_qt_robot", ["--ros-args", "--params-file", "/nonexistent/mock.yaml"], "/nonexistent/mock"),
     ],
 )
-def test_bad_configuration_is_a_clear_error(script: str, args: list[str], fragment: str) -> None:
+def test_bad_configuration_is_one_line_and_status_2(script: str, args: list[str], fragment: str) -> None:
     p = run(script, *args)
     assert p.returncode == 2, p.stderr
-    assert f"{script}: error:" in p.stderr and fragment in p.stderr, p.stderr
+    assert p.stderr.startswith(f"{script}: error:") and fragment in p.stderr, p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1 and "Traceback" not in p.stderr, p.stderr
 
 
-def test_unknown_conf_option(tmp_path: Path) -> None:
+def test_unknown_or_broken_conf_file(tmp_path: Path) -> None:
     conf = tmp_path / "qt.yaml"
     conf.write_text("speech_chanel: say\n")
     p = run("qt_controller", "--conf", str(conf))
-    assert p.returncode == 2 and "unknown option(s) ['speech_chanel']" in p.stderr, p.stderr
+    assert p.returncode == 2 and "speech_chanel" in p.stderr, p.stderr
+    conf.write_text("mock_qt_robot:\n  ros__parameters:\n    emotion_seconds: [3\n")
+    p = run("mock_qt_robot", "--ros-args", "--params-file", str(conf))
+    assert p.returncode == 2 and str(conf) in p.stderr and "Traceback" not in p.stderr, p.stderr
 
 
 def test_interactive_console_and_clean_signal_exit(tmp_path: Path) -> None:
     with NodeProcess("mock_qt_robot", "--conf", str(CONFIG / "mock_qt_robot.yaml")) as mock:
-        mock.wait_for_output("mock QT robot ready")
+        mock.wait_for_output("mock QT robot ready", 60)
+        # Typed right after start-up: give discovery of the mock more than the default 2 s on a busy machine.
         with NodeProcess("qt_controller", "--interactive", "--speech-channel", "say",
-                         stdin=subprocess.PIPE) as ctl:
-            ctl.wait_for_output("listening for commands")
+                         "--discovery-timeout", "30", stdin=subprocess.PIPE) as ctl:
+            ctl.wait_for_output("listening for commands", 60)
             assert ctl.proc.stdin is not None
             ctl.proc.stdin.write("set speech hello\nset emotion Happy\nget emotion\nset volume 500\n")
             ctl.proc.stdin.close()  # end of input: the controller exits
@@ -71,10 +86,10 @@ def test_interactive_console_and_clean_signal_exit(tmp_path: Path) -> None:
         assert "ok: emotion QT/happy sent to /qt_robot/emotion/show" in out
         assert "ok: emotion QT/happy (sent at t=" in out
         assert "error: bad command: volume 500 is out of range [0, 100]" in out
-        wait_until(lambda: "emotion_started" in mock.output, 10, "the mock to show the emotion")
+        wait_until(lambda: "emotion_started" in mock.output, 30, "the mock to show the emotion")
         assert mock.stop(signal.SIGINT) == 0, mock.output
     with NodeProcess("qt_controller", "--conf", str(CONFIG / "qt_controller.yaml")) as ctl:
-        ctl.wait_for_output("listening for commands")  # the shipped defaults file is valid
+        ctl.wait_for_output("listening for commands", 60)  # the shipped defaults file is valid
         assert ctl.stop(signal.SIGTERM) == 0, ctl.output
 
 
@@ -83,10 +98,10 @@ def test_controller_keeps_working_across_a_mock_restart(wall_probe) -> None:
     mock = NodeProcess("mock_qt_robot")
     mocks = [mock]
     try:
-        mock.wait_for_output("mock QT robot ready")
+        mock.wait_for_output("mock QT robot ready", 60)
         with NodeProcess("qt_controller", "--ros-args", "-p", "service_timeout:=1.5",
                          "-p", "discovery_timeout:=1.0") as ctl:
-            ctl.wait_for_output("listening for commands")
+            ctl.wait_for_output("listening for commands", 60)
             wait_until(p.connected, 20, "discovery of qt_controller")
             wait_until(lambda: p.send("set gesture base 2.0")["ok"], 30, "the first gesture to be accepted")
             assert p.send("set speech before the restart")["ok"]
@@ -100,7 +115,7 @@ def test_controller_keeps_working_across_a_mock_restart(wall_probe) -> None:
             restarted_at = time.time()
             mock = NodeProcess("mock_qt_robot")
             mocks.append(mock)
-            mock.wait_for_output("mock QT robot ready")
+            mock.wait_for_output("mock QT robot ready", 60)
             wait_until(lambda: p.send("set gesture base 2.0")["ok"], 30, "gestures to work again")
             assert p.send("set speech after the restart")["ok"]
             wait_until(lambda: "speech_started" in mock.output, 10, "the new mock to speak")

@@ -2,15 +2,23 @@
 
 from __future__ import annotations
 
-import queue
+import logging
 import threading
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 import pytest
 
+from helpers import wait_until
 from qt_controller.commands import HELP_TEXT
-from qt_controller.manager import Reply, RobotManager
+from qt_controller.manager import (
+    LOG_LINES_PER_SECOND,
+    OVERLOADED,
+    REMOTE_EXIT_DISABLED,
+    STOPPING,
+    Reply,
+    RobotManager,
+)
 from qt_controller.robot_interface import Outcome, RobotInterface
 
 
@@ -27,7 +35,6 @@ class RecordingRobot(RobotInterface):
     def __init__(self) -> None:
         super().__init__("Recorder")
         self.calls: list[tuple[str, tuple[Any, ...]]] = []
-        self.commands: queue.Queue[str] = queue.Queue()
 
     def configure(self, options: Mapping[str, Any]) -> Outcome:
         return Outcome.success()
@@ -75,12 +82,6 @@ class RecordingRobot(RobotInterface):
 
     def get_emotion(self) -> Outcome:
         return self._record("get_emotion")
-
-    def get_robot_command(self, timeout: float | None = None) -> str | None:
-        try:
-            return self.commands.get(timeout=timeout)
-        except queue.Empty:
-            return None
 
 
 @pytest.mark.parametrize(
@@ -138,7 +139,6 @@ def test_defaults_answer_not_implemented_by_robot() -> None:
         reply = manager.handle(line)
         assert not reply.ok
         assert reply.message == f"{method} is not implemented by Minimal"
-    assert MinimalRobot().get_robot_command(timeout=0) is None
 
 
 def test_help_and_exit() -> None:
@@ -155,20 +155,28 @@ def test_reply_json_shape() -> None:
     assert reply.as_dict(2.0)["data"] == {"emotion": "QT/sad"}
 
 
+def run_in_thread(manager: RobotManager, replies: list[Reply], stop: threading.Event) -> threading.Thread:
+    worker = threading.Thread(target=manager.run, args=(replies.append, stop, 0.01))
+    worker.start()
+    return worker
+
+
 def test_run_loop_answers_queued_commands_until_exit() -> None:
     robot = RecordingRobot()
     manager = RobotManager(robot)
     replies: list[Reply] = []
     for line in ("set speech one", "nonsense", "set volume 7", "exit", "set speech never"):
-        robot.commands.put(line)
-    stop = threading.Event()
-    worker = threading.Thread(target=manager.run, args=(replies.append, stop, 0.01))
-    worker.start()
+        assert manager.submit(line, remote=False) is None
+    worker = run_in_thread(manager, replies, threading.Event())
     worker.join(5)
     assert not worker.is_alive()
-    assert [r.ok for r in replies] == [True, False, True, True]
-    assert [r.command for r in replies] == ["set speech one", "nonsense", "set volume 7", "exit"]
-    assert robot.commands.get_nowait() == "set speech never"  # nothing after exit is handled
+    assert [r.command for r in replies] == ["set speech one", "nonsense", "set volume 7", "exit",
+                                            "set speech never"]
+    assert [r.ok for r in replies] == [True, False, True, True, False]
+    assert replies[-1].data["error"] == STOPPING  # answered, not executed
+    assert ("set_speech", ("never",)) not in robot.calls
+    late = manager.submit("set speech later", remote=True)  # after the loop ended: answered at once
+    assert late is not None and not late.ok and late.data["error"] == STOPPING
 
 
 def test_run_loop_stops_on_event() -> None:
@@ -179,3 +187,96 @@ def test_run_loop_stops_on_event() -> None:
     stop.set()
     worker.join(5)
     assert not worker.is_alive()
+
+
+def test_exit_from_the_topic_is_refused_unless_allowed() -> None:
+    manager = RobotManager(RecordingRobot())
+    refused = manager.handle("exit", remote=True)
+    assert not refused.ok and refused.data["error"] == REMOTE_EXIT_DISABLED
+    assert "allow_remote_exit" in refused.message
+    assert not manager.exit_requested
+    assert manager.handle("exit", remote=False).ok and manager.exit_requested  # the console may
+
+    allowed = RobotManager(RecordingRobot(), allow_remote_exit=True)
+    assert allowed.handle("exit", remote=True).ok and allowed.exit_requested
+
+    replies: list[Reply] = []
+    queued = RobotManager(RecordingRobot())
+    for line in ("exit", "set volume 3"):
+        queued.submit(line, remote=True)
+    stop = threading.Event()
+    worker = run_in_thread(queued, replies, stop)
+    wait_until(lambda: len(replies) == 2, 10, "two replies")
+    assert worker.is_alive(), "a remote exit did not stop the loop"
+    assert [(r.command, r.ok) for r in replies] == [("exit", False), ("set volume 3", True)]
+    stop.set()
+    worker.join(5)
+
+
+def test_every_line_of_a_burst_gets_one_reply_in_order() -> None:
+    robot = RecordingRobot()
+    manager = RobotManager(robot)
+    replies: list[Reply] = []
+    stop = threading.Event()
+    worker = run_in_thread(manager, replies, stop)
+    lines = [f"set volume {i % 101}" if i % 3 else f"set volume {101 + i}" for i in range(10_000)]
+    for line in lines:  # as fast as a subscription callback can take them
+        assert manager.submit(line, remote=True) is None
+    wait_until(lambda: len(replies) == len(lines), 60, "a reply to every line")
+    stop.set()
+    worker.join(5)
+    assert [r.command for r in replies] == lines
+    assert [r.ok for r in replies] == [bool(i % 3) for i in range(10_000)]
+    assert [args[0] for _, args in robot.calls] == [i % 101 for i in range(10_000) if i % 3]
+
+
+def test_a_full_queue_answers_overloaded_never_silence() -> None:
+    manager = RobotManager(RecordingRobot(), queue_limit=3)
+    immediate = [manager.submit(f"set volume {i}", remote=True) for i in range(5)]
+    assert immediate[:3] == [None, None, None]
+    for i, reply in enumerate(immediate[3:], start=3):
+        assert reply is not None and not reply.ok and reply.command == f"set volume {i}"
+        assert reply.data == {"error": OVERLOADED, "waiting": 3}
+    assert manager.overloaded == 2 and manager.waiting == 3
+    replies: list[Reply] = []
+    stop = threading.Event()
+    worker = run_in_thread(manager, replies, stop)
+    wait_until(lambda: len(replies) == 3, 10, "three replies")
+    stop.set()
+    worker.join(5)
+    assert [r.command for r in replies] == ["set volume 0", "set volume 1", "set volume 2"]
+    assert all(r.ok for r in replies)
+
+
+class LogLines(logging.Handler):
+    def __init__(self) -> None:
+        super().__init__()
+        self.lines: list[str] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.lines.append(record.getMessage())
+
+
+def test_a_burst_is_logged_as_a_summary_not_line_by_line() -> None:
+    log = logging.getLogger("test.manager.burst")
+    log.propagate = False
+    log.setLevel(logging.DEBUG)
+    handler = LogLines()
+    log.handlers[:] = [handler]
+    now = [0.0]
+    manager = RobotManager(RecordingRobot(), log, clock=lambda: now[0])
+    for i in range(LOG_LINES_PER_SECOND + 30):
+        manager.submit(f"set volume {i % 101}", remote=True)
+    replies: list[Reply] = []
+    stop = threading.Event()
+    worker = run_in_thread(manager, replies, stop)
+    wait_until(lambda: len(handler.lines) == LOG_LINES_PER_SECOND + 1, 10, "the burst summary")
+    assert len(replies) == LOG_LINES_PER_SECOND + 30  # every line answered
+    assert all("-> ok" in line for line in handler.lines[:LOG_LINES_PER_SECOND])
+    assert handler.lines[-1].startswith("30 more command lines in a burst: 30 ok, 0 error(s)")
+    now[0] = 2.0  # a second later, one line is logged on its own again
+    manager.submit("set volume 300", remote=True)
+    wait_until(lambda: len(handler.lines) == LOG_LINES_PER_SECOND + 2, 10, "the next line")
+    assert handler.lines[-1].startswith("'set volume 300' -> error")
+    stop.set()
+    worker.join(5)

@@ -55,6 +55,7 @@ def test_coerce_request_checks_fields_and_types() -> None:
             qs.coerce_request(spec, request)
 
 
+@pytest.mark.integration
 @pytest.mark.ros
 def test_json_request_reply_roundtrip_shared_server_and_errors(ros_context: Any) -> None:
     from rclpy.node import Node

@@ -11,7 +11,7 @@ import pytest
 from helpers import wait_until
 from qt_controller.joint_limits import HOME
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.integration, pytest.mark.ros]
 
 
 def test_speech_takes_time_proportional_to_length_and_queues(robot_side) -> None:

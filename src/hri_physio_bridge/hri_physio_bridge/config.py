@@ -223,6 +223,11 @@ class NodeConfig(BaseModel):
         return f"{text} (default: {default!r})"
 
     @classmethod
+    def help_text(cls, name: str) -> str:
+        """:meth:`describe` escaped for argparse (which formats help with ``%``)."""
+        return cls.describe(name).replace("%", "%%")
+
+    @classmethod
     def kind(cls, name: str) -> str:
         return _kind(cls.model_fields[name].annotation)
 
@@ -267,14 +272,14 @@ def add_config_arguments(parser: argparse.ArgumentParser, config_cls: type[NodeC
         kind = _kind(info.annotation)
         if _extra(info).get("switch"):
             group.add_argument(flag, dest=name, action="store_const", const=True, default=None,
-                               help=config_cls.describe(name))
+                               help=config_cls.help_text(name))
         elif kind == "choice":
             choices = [str(c) for c in get_args(_strip_optional(info.annotation))]
             group.add_argument(flag, dest=name, choices=choices, default=None,
-                               help=config_cls.describe(name))
+                               help=config_cls.help_text(name))
         else:
             group.add_argument(flag, dest=name, default=None, metavar=_METAVAR[kind],
-                               help=config_cls.describe(name))
+                               help=config_cls.help_text(name))
 
 
 def given_options(args: argparse.Namespace, config_cls: type[NodeConfig]) -> dict[str, Any]:

@@ -40,12 +40,19 @@ class OverflowPolicy(enum.Enum):
 
 @dataclass(frozen=True)
 class Gap:
-    """Samples that are missing from the stream (dropped or never received)."""
+    """Samples that are missing from the stream (dropped or never received).
+
+    ``first_t``/``last_t``: the first and last missing sample (estimated when never received);
+    ``t_before``/``t_after``: the received samples either side of the hole when known (the
+    processor cuts its windows there), None otherwise.
+    """
 
     first_t: float
     last_t: float
     count: int
     reason: str
+    t_before: float | None = None
+    t_after: float | None = None
 
 
 @dataclass

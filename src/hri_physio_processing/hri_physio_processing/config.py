@@ -1,20 +1,21 @@
-"""Configuration of the NeuroKit2 processor: defaults, validation, the seed's YAML keys.
+"""Configuration of the NeuroKit2 processor: one declaration drives flags, YAML, ROS parameters, help.
 
 The seed's neurokitProcessor.py read ``name``, ``input``, ``buffer`` (samples per
 processing window), ``window`` (samples kept for the next window, i.e. the overlap),
-``plot`` and ``verbose``. Those keys are accepted and translated; ours are in seconds.
+``plot`` and ``verbose``. Those keys are accepted and translated (:meth:`translate_keys`);
+ours are in seconds.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import math
-from collections.abc import Mapping
-from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Literal
 
+from pydantic import TypeAdapter, ValidationError, model_validator
+
+from hri_physio_bridge import topics
+from hri_physio_bridge.config import ConfigError, NodeConfig, option
 from hri_physio_bridge.streamers.factory import split_uri
-from hri_physio_processing.features import MODES, QUALITY_METHODS, FeatureSettings
+from hri_physio_processing.features import FeatureSettings
 
 #: Per-mode defaults for options left at 0 ("auto").
 MODE_DEFAULTS: dict[str, dict[str, float]] = {
@@ -24,111 +25,121 @@ MODE_DEFAULTS: dict[str, dict[str, float]] = {
     "eda": {"flatline_seconds": 10.0, "saturation_fraction": 0.05, "dedup_seconds": 1.0},
 }
 
-SEED_KEYS = ("name", "buffer", "window", "plot", "verbose")
+DEFAULT_RATE = 130.0
 
 
-class ConfigError(ValueError):
-    """A configuration value is unusable; the message names the key and says why."""
-
-
-@dataclass(frozen=True)
-class ProcessorConfig:
+class ProcessorConfig(NodeConfig):
     """Every option of neurokit_processor, with a default that runs without hardware."""
 
-    input: str = "ros:/physio/polar_h10/ecg"
-    output_prefix: str = ""  # "" = the input topic (ros: inputs only)
-    mode: str = "ecg"
-    sampling_rate: float = 130.0
-    num_channels: int = 1
-    channel: int = 0
-    window_seconds: float = 60.0
-    hop_seconds: float = 5.0
-    lsl_output: bool = False
-    lsl_prefix: str = ""  # "" = output_prefix
-    quality_method: str = "templatematch"
-    min_quality: float = 0.5
-    min_beats: int = 5
-    min_hr: float = 30.0
-    max_hr: float = 220.0
-    flatline_seconds: float = 0.0  # 0 = mode default
-    saturation_fraction: float = 0.0  # 0 = mode default
-    rate_tolerance: float = 0.05
-    gap_factor: float = 1.5
-    min_window_seconds: float = 10.0
-    edge_guard_seconds: float = 2.0
-    dedup_seconds: float = 0.0  # 0 = mode default
-    correct_artifacts: bool = False
-    resolve_timeout: float = 10.0
-    wait_for_consumers: float = 0.0  # s to wait for a listener on every ROS output (0 = no wait)
-    verbose: bool = False
+    SEED_KEYS: ClassVar[tuple[str, ...]] = ("name", "input", "buffer", "window", "plot", "verbose")
 
-    KEYS: ClassVar[tuple[str, ...]] = ()
+    input: str = option(f"ros:{topics.POLAR_H10_ECG}", "source: ros:/<topic>, lsl:<name>[?type=&source_id=], "
+                        "csv:<file>[?rate=] (no scheme = LSL name, as the seed)", min_length=1)
+    output_prefix: str = option("", "absolute topic prefix of the outputs, e.g. /physio/polar_h10/ecg "
+                                "('' = the input topic; required for lsl: and csv: inputs)")
+    mode: Literal["ecg", "ppg", "eda"] = option("ecg", "signal kind")
+    sampling_rate: float = option(DEFAULT_RATE, "nominal rate of the input (checked against the "
+                                  "timestamps)", unit="Hz", gt=0)
+    num_channels: int = option(1, "channels per input sample (ROS 2 input frames must match)", ge=1)
+    channel: int = option(0, "which input channel to process (0-based)", ge=0)
+    window_seconds: float = option(60.0, "signal per processed window", unit="s", gt=0)
+    hop_seconds: float = option(5.0, "time between window starts (window - hop = overlap)", unit="s", gt=0)
+    lsl_output: bool = option(False, "also publish every output on LSL")
+    lsl_prefix: str = option("", "LSL stream-name prefix ('' = output_prefix)")
+    quality_method: Literal["templatematch", "averageQRS", "zhao2018", "none"] = option(
+        "templatematch", "NeuroKit2 signal quality method (ECG)")
+    min_quality: float = option(0.5, "windows with a lower quality are flagged (features NaN)", ge=0, le=1)
+    min_beats: int = option(5, "fewer beats in a window: features NaN (a rate needs two)", ge=2)
+    min_hr: float = option(30.0, "mean rate below this: flagged, not a heart signal", unit="bpm", ge=0)
+    max_hr: float = option(220.0, "mean rate above this: flagged", unit="bpm", gt=0)
+    flatline_seconds: float = option(0.0, "a constant stretch this long flags the window (0 = mode "
+                                     "default: 2 s ECG/PPG, 10 s EDA)", unit="s", ge=0)
+    saturation_fraction: float = option(0.0, "this share of samples at the extremes flags the window "
+                                        "(0 = mode default: 1 percent ECG/PPG, 5 percent EDA)", ge=0, le=1)
+    rate_tolerance: float = option(0.05, "relative mismatch between timestamps and sampling_rate that "
+                                   "flags a window", gt=0, lt=1)
+    gap_factor: float = option(1.5, "timestamp step (in sample periods) that counts as a gap and restarts "
+                               "windows", gt=1)
+    min_window_seconds: float = option(10.0, "shortest stretch between gaps (or at the end) still "
+                                       "processed", unit="s", ge=0)
+    edge_guard_seconds: float = option(2.0, "overlapping windows publish peaks up to this far from their "
+                                       "end", unit="s", ge=0)
+    dedup_seconds: float = option(0.0, "peaks closer than this to the last published one are duplicates "
+                                  "(0 = mode default: 0.2 s ECG/PPG, 1 s EDA)", unit="s", ge=0)
+    correct_artifacts: bool = option(False, "let NeuroKit2 correct R-peak artefacts "
+                                     "(ecg_peaks correct_artifacts)")
+    resolve_timeout: float = option(10.0, "how long one attempt waits for an LSL input to appear; "
+                                    "attempts repeat (with backoff) until it does", unit="s", ge=0)
+    wait_for_consumers: float = option(0.0, "how long to wait for a listener on every ROS output before "
+                                       "reading the input (topics are volatile: a log replay would "
+                                       "otherwise lose its first windows; 0 = no wait)", unit="s", ge=0)
+    verbose: bool = option(False, "log every window")
 
+    # -- the seed's keys -----------------------------------------------------------------------
     @classmethod
-    def from_mapping(cls, values: Mapping[str, Any], source: str = "configuration") -> ProcessorConfig:
-        """Build from flat key/value pairs (YAML, ROS parameters); seed keys are translated."""
-        data = {str(k).replace("-", "_"): v for k, v in values.items()}
-        data = translate_seed_keys(data, source)
-        unknown = sorted(set(data) - set(cls.KEYS))
-        if unknown:
-            raise ConfigError(f"{source}: unknown option(s) {unknown}; known: {sorted(cls.KEYS + SEED_KEYS)}")
-        kwargs: dict[str, Any] = {}
-        for f in dataclasses.fields(cls):
-            if f.name in data:
-                kwargs[f.name] = _coerce(f.name, data[f.name], type(getattr(cls(), f.name)), source)
-        cfg = cls(**kwargs)
-        cfg.validate(source)
-        return cfg
+    def translate_keys(cls, data: dict[str, Any], source: str) -> dict[str, Any]:
+        """Map the seed's keys (samples) onto ours (seconds); refuse contradictory combinations."""
+        out = dict(data)
+        if "buffer" in out:
+            if "window_seconds" in out:
+                raise ConfigError(
+                    f"{source}: give either buffer (samples, the seed's key) or window_seconds, not both")
+            if "hop_seconds" in out:
+                raise ConfigError(f"{source}: give either buffer/window (samples) or hop_seconds, not both")
+            rate = _number(out.get("sampling_rate", DEFAULT_RATE), "sampling_rate", source)
+            buffer = _number(out.pop("buffer"), "buffer", source)
+            keep = _number(out.pop("window", 0), "window", source)
+            if not 0 <= keep < buffer:
+                raise ConfigError(
+                    f"{source}: window (samples kept, {keep}) must be >= 0 and below buffer ({buffer})")
+            if rate > 0:
+                out["window_seconds"] = buffer / rate
+                out["hop_seconds"] = (buffer - keep) / rate
+        elif "window" in out:
+            raise ConfigError(f"{source}: window (the seed's overlap in samples) needs buffer too")
+        if out.pop("plot", False) not in (False, "false", "False", 0):
+            raise ConfigError(f"{source}: plot is not supported (the node runs headless); record and plot "
+                              "offline")
+        name = out.pop("name", None)
+        if name is not None and "lsl_prefix" not in out:
+            out["lsl_prefix"] = "/" + str(name).strip("/")
+        inp = out.get("input")
+        if isinstance(inp, str) and inp and ":" not in inp:
+            out["input"] = "lsl:" + inp  # the seed's input was an LSL stream name
+        return out
 
-    def validate(self, source: str = "configuration") -> None:
-        def fail(key: str, why: str) -> None:
-            raise ConfigError(f"{source}: {key} {why}")
-
+    # -- cross-field rules ---------------------------------------------------------------------
+    @model_validator(mode="after")
+    def _consistent(self) -> ProcessorConfig:
         try:
-            split_uri(self.input)
+            scheme, address = split_uri(self.input)
         except ValueError as exc:
-            fail("input", str(exc))
-        if self.mode not in MODES:
-            fail("mode", f"must be one of {', '.join(MODES)}, got {self.mode!r}")
-        if not (math.isfinite(self.sampling_rate) and self.sampling_rate > 0):
-            fail("sampling_rate", f"must be > 0 Hz, got {self.sampling_rate}")
-        if self.num_channels < 1:
-            fail("num_channels", f"must be >= 1, got {self.num_channels}")
-        if not 0 <= self.channel < self.num_channels:
-            fail("channel", f"must index one of the {self.num_channels} channel(s), got {self.channel}")
-        if self.window_samples < 2:
-            fail("window_seconds", f"must cover at least 2 samples, got {self.window_seconds} s")
-        if not 1 <= self.hop_samples <= self.window_samples:
-            fail("hop_seconds", f"must be > 0 and at most window_seconds ({self.window_seconds} s), "
-                 f"got {self.hop_seconds} s")
-        if self.quality_method not in QUALITY_METHODS:
-            fail("quality_method",
-                 f"must be one of {', '.join(QUALITY_METHODS)}, got {self.quality_method!r}")
-        if not 0 <= self.min_quality <= 1:
-            fail("min_quality", f"must be in [0, 1], got {self.min_quality}")
-        if self.min_beats < 2:
-            fail("min_beats", f"must be >= 2 (a rate needs two beats), got {self.min_beats}")
-        if not 0 <= self.min_hr < self.max_hr:
-            fail("min_hr/max_hr", f"must satisfy 0 <= min_hr < max_hr, got {self.min_hr}, {self.max_hr}")
-        for key in ("flatline_seconds", "saturation_fraction", "dedup_seconds", "edge_guard_seconds",
-                    "min_window_seconds", "resolve_timeout", "wait_for_consumers"):
-            value = getattr(self, key)
-            if not (math.isfinite(value) and value >= 0):
-                fail(key, f"must be >= 0, got {value}")
-        if self.saturation_fraction > 1:
-            fail("saturation_fraction", f"must be at most 1, got {self.saturation_fraction}")
-        if not 0 < self.rate_tolerance < 1:
-            fail("rate_tolerance", f"must be in (0, 1), got {self.rate_tolerance}")
-        if not self.gap_factor > 1:
-            fail("gap_factor", f"must be > 1 sample period, got {self.gap_factor}")
-        if self.min_window_seconds > self.window_seconds:
-            fail("min_window_seconds", f"({self.min_window_seconds} s) cannot exceed window_seconds "
-                 f"({self.window_seconds} s)")
+            raise ValueError(f"input: {exc}") from None
+        if scheme == "ros" and not address.startswith("/"):
+            raise ValueError(f"input: ROS topic {address!r} must be absolute (start with '/'), "
+                             f"e.g. ros:/{address.lstrip('~/')}")
         if self.output_prefix and not self.output_prefix.startswith("/"):
-            fail("output_prefix",
-                 f"must be an absolute ROS name (start with '/'), got {self.output_prefix!r}")
+            raise ValueError(f"output_prefix must be an absolute ROS name (start with '/'), "
+                             f"got {self.output_prefix!r}")
+        if scheme != "ros" and not self.output_prefix:
+            raise ValueError(f"output_prefix is required when the input is not a ROS topic (input is "
+                             f"{self.input!r}); e.g. output_prefix: /physio/polar_h10/{self.mode}")
+        if self.channel >= self.num_channels:
+            raise ValueError(f"channel must index one of the {self.num_channels} channel(s), "
+                             f"got {self.channel}")
+        if self.window_samples < 2:
+            raise ValueError(f"window_seconds must cover at least 2 samples, got {self.window_seconds} s")
+        if not 1 <= self.hop_samples <= self.window_samples:
+            raise ValueError(f"hop_seconds must cover at least one sample and at most window_seconds "
+                             f"({self.window_seconds} s), got {self.hop_seconds} s")
+        if self.min_hr >= self.max_hr:
+            raise ValueError(f"min_hr must be below max_hr, got {self.min_hr} and {self.max_hr}")
+        if self.min_window_seconds > self.window_seconds:
+            raise ValueError(f"min_window_seconds ({self.min_window_seconds} s) cannot exceed "
+                             f"window_seconds ({self.window_seconds} s)")
+        return self
 
-    # -- derived values --------------------------------------------------------
+    # -- derived values ------------------------------------------------------------------------
     @property
     def window_samples(self) -> int:
         return round(self.window_seconds * self.sampling_rate)
@@ -136,6 +147,10 @@ class ProcessorConfig:
     @property
     def hop_samples(self) -> int:
         return round(self.hop_seconds * self.sampling_rate)
+
+    @property
+    def input_scheme(self) -> str:
+        return split_uri(self.input)[0]
 
     def mode_default(self, key: str) -> float:
         value = float(getattr(self, key))
@@ -158,78 +173,24 @@ class ProcessorConfig:
         )
 
     def resolved_output_prefix(self) -> str:
+        """The outputs' topic prefix: ``output_prefix``, or the input topic of a ros: input."""
         if self.output_prefix:
             return self.output_prefix.rstrip("/")
-        scheme, _, address = self.input.partition(":")
-        if scheme == "ros":
-            return address.partition("?")[0].rstrip("/")
-        raise ConfigError(
-            f"output_prefix is required when the input is not a ROS topic (input is {self.input!r}); "
-            f"e.g. output_prefix: /physio/polar_h10/{self.mode}"
-        )
+        return split_uri(self.input)[1].partition("?")[0].rstrip("/")
 
     def resolved_lsl_prefix(self) -> str:
         return self.lsl_prefix or self.resolved_output_prefix()
 
 
-ProcessorConfig.KEYS = tuple(f.name for f in dataclasses.fields(ProcessorConfig))
+_SEED_NUMBERS = {"buffer": TypeAdapter(int), "window": TypeAdapter(int), "sampling_rate": TypeAdapter(float)}
 
 
-def _coerce(key: str, value: Any, kind: type, source: str) -> Any:
+def _number(value: Any, key: str, source: str) -> Any:
+    """A number needed to translate the seed's keys (pydantic converts it); ConfigError naming the key."""
     try:
-        if kind is bool:
-            if isinstance(value, bool):
-                return value
-            text = str(value).strip().lower()
-            if text in ("1", "true", "yes", "on"):
-                return True
-            if text in ("0", "false", "no", "off"):
-                return False
-            raise ValueError(value)
-        if kind is int:
-            if isinstance(value, float) and not value.is_integer():
-                raise ValueError(value)
-            if isinstance(value, bool):
-                raise ValueError(value)
-            return int(value)
-        if kind is float:
-            if isinstance(value, bool):
-                raise ValueError(value)
-            return float(value)
-        return str(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{source}: {key} must be {kind.__name__}, got {value!r}") from None
-
-
-def translate_seed_keys(data: dict[str, Any], source: str) -> dict[str, Any]:
-    """Map the seed's keys (samples) onto ours (seconds); refuse contradictory combinations."""
-    out = dict(data)
-    rate = float(out.get("sampling_rate", ProcessorConfig.sampling_rate))
-    if "buffer" in out:
-        if "window_seconds" in out:
-            raise ConfigError(
-                f"{source}: give either buffer (samples, the seed's key) or window_seconds, not both"
-            )
-        buffer = _coerce("buffer", out.pop("buffer"), int, source)
-        keep = _coerce("window", out.pop("window", 0), int, source)
-        if "hop_seconds" in out:
-            raise ConfigError(f"{source}: give either buffer/window (samples) or hop_seconds, not both")
-        if not 0 <= keep < buffer:
-            raise ConfigError(
-                f"{source}: window (samples kept, {keep}) must be >= 0 and below buffer ({buffer})"
-            )
-        out["window_seconds"] = buffer / rate
-        out["hop_seconds"] = (buffer - keep) / rate
-    elif "window" in out:
-        raise ConfigError(f"{source}: window (the seed's overlap in samples) needs buffer too")
-    if out.pop("plot", False) not in (False, "false", "False", 0):
-        raise ConfigError(
-            f"{source}: plot is not supported (the node runs headless); record and plot offline"
-        )
-    name = out.pop("name", None)
-    if name is not None and "lsl_prefix" not in out:
-        out["lsl_prefix"] = "/" + str(name).strip("/")
-    inp = out.get("input")
-    if isinstance(inp, str) and ":" not in inp:
-        out["input"] = "lsl:" + inp  # the seed's input was an LSL stream name
-    return out
+        if isinstance(value, bool):
+            raise ValueError("a boolean is not a number")
+        return _SEED_NUMBERS[key].validate_python(value)
+    except (ValidationError, ValueError):
+        kind = "an integer" if key != "sampling_rate" else "a number"
+        raise ConfigError(f"{source}: {key}: expected {kind}, got {value!r}") from None

@@ -38,7 +38,7 @@ from hri_physio_processing.features import (
     detect,
     extract,
 )
-from hri_physio_processing.windowing import Discarded, Gap, Window, WindowAccumulator
+from hri_physio_processing.windowing import ClockJump, Discarded, Gap, Window, WindowAccumulator
 
 
 @dataclass(frozen=True)
@@ -77,6 +77,7 @@ class ProcessorStats:
     published_peaks: int = 0
     duplicate_peaks: int = 0
     gaps: int = 0
+    clock_jumps: int = 0
     discarded_samples: int = 0
     samples_in: int = 0
 
@@ -97,7 +98,7 @@ class _Pending:
     examples: list[str] = field(default_factory=list)
 
     def empty(self) -> bool:
-        return self.gaps == 0 and self.discarded == 0
+        return self.gaps == 0 and self.backward_steps == 0 and self.discarded == 0
 
 
 class NeurokitProcessor:
@@ -154,24 +155,34 @@ class NeurokitProcessor:
             if isinstance(ev, Window):
                 out.extend(self._report_pending())
                 out.extend(self._window(ev))
-            elif isinstance(ev, Gap):
-                out.extend(self._close_segment())
-                self.stats.gaps += 1
-                p = self._pending
-                p.gaps += 1
-                p.missing_samples += ev.missing_samples
-                p.backward_steps += ev.kind == "backward"
-                step = ev.t_after - ev.t_before
-                self._note(p, ev.t_before, ev.t_after,
-                           f"{ev.kind} {ev.t_before:.6f} -> {ev.t_after:.6f} ({step:+.4g} s)")
-                self._boundary = self._last_peak = None  # a new segment starts
-                out.extend(self._maybe_report(ev.t_after))
+            elif isinstance(ev, Gap | ClockJump):
+                out.extend(self._cut(ev))
             elif isinstance(ev, Discarded):
                 self.stats.discarded_samples += ev.samples
                 self._pending.discarded += ev.samples
                 self._note(self._pending, ev.t_start, ev.t_end,
                            f"{ev.samples} sample(s) {ev.t_start:.6f}..{ev.t_end:.6f}")
                 out.extend(self._maybe_report(ev.t_end))
+        return out
+
+    def _cut(self, ev: Gap | ClockJump) -> list[Output]:
+        """The stream is cut at a gap or a clock jump: close the segment, note it for the report."""
+        out = self._close_segment()
+        p = self._pending
+        t_before, t_after = float(ev.t_before), float(ev.t_after)
+        if isinstance(ev, Gap):
+            self.stats.gaps += 1
+            p.gaps += 1
+            p.missing_samples += ev.count
+            kind = "gap"
+        else:
+            self.stats.clock_jumps += 1
+            p.backward_steps += 1
+            kind = "backward"
+        self._note(p, t_before, t_after,
+                   f"{kind} {t_before:.6f} -> {t_after:.6f} ({t_after - t_before:+.4g} s)")
+        self._boundary = self._last_peak = None  # a new segment starts
+        out.extend(self._maybe_report(t_after))
         return out
 
     @staticmethod
@@ -194,18 +205,19 @@ class NeurokitProcessor:
             return []
         self._last_event_t = p.t_last
         reasons = []
-        if p.gaps:
+        cuts = p.gaps + p.backward_steps
+        if cuts:
             reasons.append(
-                f"{p.gaps} timestamp discontinuit{'y' if p.gaps == 1 else 'ies'} "
-                f"(about {p.missing_samples} missing sample(s), {p.backward_steps} backward step(s)); "
-                "windows restart after each"
+                f"{cuts} timestamp discontinuit{'y' if cuts == 1 else 'ies'} "
+                f"({p.gaps} gap(s), about {p.missing_samples} missing sample(s); {p.backward_steps} "
+                "duplicate or backward step(s)); windows restart after each"
             )
         if p.discarded:
             reasons.append(
                 f"{p.discarded} sample(s) not processed: their stretch between discontinuities is shorter "
                 f"than min_window_seconds ({self.cfg.min_window_seconds:g} s)"
             )
-        if p.gaps >= 10 and p.discarded:
+        if cuts >= 10 and p.discarded:
             reasons.append("timestamps keep jumping: is sampling_rate "
                            f"({self.fs:g} Hz) right for this stream?")
         payload = {

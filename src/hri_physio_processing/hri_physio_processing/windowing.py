@@ -5,9 +5,10 @@ out windows of ``window`` samples every ``hop`` samples. The windows depend only
 samples, never on how they were chunked on the way in.
 
 The stream is cut into *segments* at timestamp discontinuities: a step longer than
-``gap_factor`` sample periods (lost samples), or a step that does not move forward
-(duplicated or reordered timestamps). Windows never span a cut, because NeuroKit2 assumes
-evenly spaced samples. When a segment ends (at a cut, or at :meth:`flush` when the input
+``gap_factor`` sample periods (lost samples: a :class:`~hri_physio_bridge.ring_buffer.Gap`,
+the bridge's one gap type), or a step that does not move forward (duplicated or reordered
+timestamps: a :class:`ClockJump`, nothing is missing). Windows never span a cut, because
+NeuroKit2 assumes evenly spaced samples. When a segment ends (at a cut, or at :meth:`flush` when the input
 ends) and it holds samples no window has covered yet, one *final* window is emitted: the
 last ``window`` samples of the segment (or the whole segment when it is shorter), so no
 sample is left out.
@@ -24,6 +25,8 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from hri_physio_bridge.ring_buffer import Gap
 
 
 @dataclass(frozen=True)
@@ -53,22 +56,19 @@ class Window:
         return float(self.timestamps[-1])
 
 
+def timestamp_gap(t_before: float, t_after: float, step: float) -> Gap:
+    """The hole between two samples ``t_after - t_before`` apart at a nominal ``step``."""
+    missing = max(0, round((t_after - t_before) / step) - 1)
+    return Gap(t_before + step, t_after - step, missing, "timestamp gap", t_before=t_before, t_after=t_after)
+
+
 @dataclass(frozen=True)
-class Gap:
-    """A discontinuity between two consecutive samples (the stream is cut there)."""
+class ClockJump:
+    """A step that does not move forward (duplicated or backward timestamp): the stream is cut
+    there, but nothing is missing."""
 
     t_before: float  # last timestamp before the cut
-    t_after: float  # first timestamp after it
-    expected_step: float  # 1 / sampling rate
-
-    @property
-    def missing_samples(self) -> int:
-        """Samples that would fit in the hole at the nominal rate (0 for backward steps)."""
-        return max(0, round((self.t_after - self.t_before) / self.expected_step) - 1)
-
-    @property
-    def kind(self) -> str:
-        return "gap" if self.t_after > self.t_before else "backward"
+    t_after: float  # first timestamp after it (<= t_before)
 
 
 @dataclass(frozen=True)
@@ -80,7 +80,7 @@ class Discarded:
     samples: int
 
 
-Event = Window | Gap | Discarded
+Event = Window | Gap | ClockJump | Discarded
 
 
 class WindowAccumulator:
@@ -150,7 +150,9 @@ class WindowAccumulator:
             events.extend(self._append(t[start:cut], v[start:cut]))
             before = float(t[cut - 1]) if cut > 0 else float(self._last_t)
             events.extend(self._end_segment())
-            events.append(Gap(before, float(t[cut]), self.step))
+            after = float(t[cut])
+            events.append(
+                timestamp_gap(before, after, self.step) if after > before else ClockJump(before, after))
             start = int(cut)
         events.extend(self._append(t[start:], v[start:]))
         self._last_t = float(t[-1])

@@ -30,12 +30,13 @@ from dataclasses import dataclass
 from typing import Any
 
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
+from hri_physio_bridge import topics
+from hri_physio_bridge.qos import command_qos
+from hri_physio_bridge.waiting import Clock, wait_until
+from qt_controller.config import SERVICE_BACKENDS as BACKENDS
 from qt_controller.robot_interface import Outcome
-
-BACKENDS = ("auto", "qt", "json")
 
 
 @dataclass(frozen=True)
@@ -47,25 +48,25 @@ class ServiceSpec:
 
 
 GESTURE_PLAY = ServiceSpec(
-    "/qt_robot/gesture/play",
+    topics.QT_GESTURE_PLAY,
     "qt_gesture_controller.srv",
     ("GesturePlay", "gesture_play"),
     (("name", str), ("speed", float)),
 )
 SPEECH_CONFIG = ServiceSpec(
-    "/qt_robot/speech/config",
+    topics.QT_SPEECH_CONFIG,
     "qt_robot_interface.srv",
     ("SpeechConfig", "speech_config"),
     (("language", str), ("pitch", int), ("speed", int)),
 )
 SET_VOLUME = ServiceSpec(
-    "/qt_robot/setting/setVolume",
+    topics.QT_SET_VOLUME,
     "qt_robot_interface.srv",
     ("SettingSetVolume", "setting_setVolume"),
     (("volume", int),),
 )
 SET_VELOCITY = ServiceSpec(
-    "/qt_robot/motors/setVelocity",
+    topics.QT_SET_VELOCITY,
     "qt_motors_controller.srv",
     ("SetVelocity", "set_velocity"),
     (("parts", list), ("velocity", int)),
@@ -120,10 +121,6 @@ def coerce_request(spec: ServiceSpec, request: Mapping[str, Any]) -> dict[str, A
     return out
 
 
-def _qos() -> QoSProfile:
-    return QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
-
-
 def _now(node: Node) -> float:
     return node.get_clock().now().nanoseconds * 1e-9
 
@@ -131,17 +128,19 @@ def _now(node: Node) -> float:
 class ServiceClient:
     """Calls one QT service; :meth:`call` blocks the calling thread (never the executor)."""
 
-    def __init__(self, node: Node, spec: ServiceSpec, backend: str = "auto") -> None:
+    def __init__(self, node: Node, spec: ServiceSpec, backend: str = "auto",
+                 clock: Clock = time.monotonic) -> None:
         self.node = node
         self.spec = spec
         self.backend = resolve_backend(backend, spec)
+        self._clock = clock
         self._lock = threading.Lock()
         self._pending: dict[str, tuple[threading.Event, list[dict[str, Any]]]] = {}
         if self.backend == "qt":
             self._client = node.create_client(find_qt_type(spec), spec.name)
         else:
-            self._pub = node.create_publisher(String, spec.name + "/request", _qos())
-            self._sub = node.create_subscription(String, spec.name + "/reply", self._on_reply, _qos())
+            self._pub = node.create_publisher(String, spec.name + "/request", command_qos())
+            self._sub = node.create_subscription(String, spec.name + "/reply", self._on_reply, command_qos())
 
     def available(self) -> bool:
         if self.backend == "qt":
@@ -149,19 +148,14 @@ class ServiceClient:
         return self._pub.get_subscription_count() > 0 and self._sub.get_publisher_count() > 0
 
     def wait_available(self, timeout: float) -> bool:
-        deadline = time.monotonic() + timeout
-        while not self.available():
-            if time.monotonic() >= deadline:
-                return False
-            time.sleep(0.02)
-        return True
+        return wait_until(self.available, timeout, clock=self._clock, poll=0.02)
 
     def call(self, timeout: float, **fields: Any) -> Outcome:
         """Send one request; success only if the robot answered ``status: true`` in time."""
-        start = time.monotonic()
+        start = self._clock()
         if not self.wait_available(timeout):
             return Outcome.failure(f"service {self.spec.name} is not available (is the robot running?)")
-        left = max(0.0, timeout - (time.monotonic() - start))
+        left = max(0.0, timeout - (self._clock() - start))
         if self.backend == "qt":
             return self._call_typed(left, fields)
         return self._call_json(left, fields)
@@ -232,8 +226,9 @@ class ServiceServer:
         if self.backend == "qt":
             self._srv = node.create_service(find_qt_type(spec), spec.name, self._on_typed)
         else:
-            self._pub = node.create_publisher(String, spec.name + "/reply", _qos())
-            self._sub = node.create_subscription(String, spec.name + "/request", self._on_request, _qos())
+            self._pub = node.create_publisher(String, spec.name + "/reply", command_qos())
+            self._sub = node.create_subscription(String, spec.name + "/request", self._on_request,
+                                                 command_qos())
 
     def _on_typed(self, request: Any, response: Any) -> Any:
         fields = {name: getattr(request, name) for name, _kind in self.spec.fields}

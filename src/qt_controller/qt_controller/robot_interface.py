@@ -102,11 +102,3 @@ class RobotInterface(ABC):
 
     def get_emotion(self) -> Outcome:
         return self.not_implemented("get_emotion")
-
-    def get_robot_command(self, timeout: float | None = None) -> str | None:
-        """The next command text addressed to this robot, or None after ``timeout`` seconds.
-
-        The default has no command source; robots fed by a topic or console override it.
-        """
-        self.not_implemented("get_robot_command")
-        return None

@@ -8,7 +8,9 @@ every 5 s), runs NeuroKit2 on each window and publishes, under ``<output_prefix>
   EDA  clean, scr_peaks (frames);        tonic, scr_count, scr_amplitude
   status (std_msgs/String JSON with "t"): window extent, flags, why a feature is NaN
 
-Scalars are one-sample frames [t, value] stamped with the end of their window.
+Scalars are one-sample frames [t, value] stamped with the end of their window. A CSV input
+that does not exist is an error at once (exit 1); an LSL stream or ROS topic that is not
+there yet is waited for until it appears or the node is stopped.
 
 Examples::
 
@@ -21,151 +23,98 @@ Examples::
 from __future__ import annotations
 
 import argparse
-import contextlib
-import dataclasses
 import json
 import sys
 import threading
-import time
 from typing import Any
 
-from hri_physio_processing.config import ConfigError, ProcessorConfig, translate_seed_keys
+from rclpy.duration import Duration
+from std_msgs.msg import String
+
+from hri_physio_bridge.node_runner import ManagedNode, logic_logger, run_node
+from hri_physio_bridge.qos import event_qos
+from hri_physio_bridge.streamers import Streamer, StreamerError, StreamSpec, create_streamer
+from hri_physio_processing.config import ProcessorConfig
+from hri_physio_processing.features import SCALARS, SIGNAL_FEATURES
+from hri_physio_processing.pipeline import ProcessingPipeline
+from hri_physio_processing.processor import FrameOutput, Output, StatusOutput
 
 PROG = "neurokit_processor"
-_HELP = {
-    "input": "source: ros:/<topic>, lsl:<name>[?type=&source_id=], csv:<file>[?rate=] "
-    "(no scheme = LSL name, as the seed)",
-    "output_prefix": "topic prefix of the outputs, e.g. /physio/polar_h10/ecg (default: the input topic)",
-    "mode": "signal: ecg | ppg | eda",
-    "sampling_rate": "nominal rate of the input in Hz (checked against the timestamps)",
-    "num_channels": "channels per input sample (ROS 2 input frames must match)",
-    "channel": "which input channel to process (0-based)",
-    "window_seconds": "seconds of signal per processed window",
-    "hop_seconds": "seconds between window starts (window - hop = overlap)",
-    "lsl_output": "also publish every output on LSL",
-    "lsl_prefix": "LSL stream-name prefix (default: output_prefix)",
-    "quality_method": "NeuroKit2 ECG quality: templatematch | averageQRS | zhao2018 | none",
-    "min_quality": "windows with a lower quality are flagged (features NaN)",
-    "min_beats": "fewer beats in a window: features NaN",
-    "min_hr": "mean rate below this (bpm): flagged, not a heart signal",
-    "max_hr": "mean rate above this (bpm): flagged",
-    "flatline_seconds": "a constant stretch this long flags the window (0 = mode default)",
-    "saturation_fraction": "this share of samples at the extremes flags the window (0 = mode default)",
-    "rate_tolerance": "relative mismatch between timestamps and sampling_rate that flags a window",
-    "gap_factor": "timestamp step (in sample periods) that counts as a gap and restarts windows",
-    "min_window_seconds": "shortest stretch between gaps (or at the end) still processed",
-    "edge_guard_seconds": "overlapping windows publish peaks up to this far from their end",
-    "dedup_seconds": "peaks closer than this to the last published one are duplicates (0 = mode default)",
-    "correct_artifacts": "let NeuroKit2 correct R-peak artefacts (ecg_peaks correct_artifacts)",
-    "resolve_timeout": "seconds to wait for the input stream per attempt",
-    "wait_for_consumers": "seconds to wait for a listener on every ROS output before reading input "
-    "(topics are volatile: a log replay would otherwise lose its first windows; 0 = no wait)",
-    "verbose": "log every window",
-}
+#: Outputs at the input's sampling rate (the rest are one value per window).
+_SAMPLE_RATE_OUTPUTS = ("clean", "rpeaks", "peaks", "scr_peaks")
 
 
-def _to_bool(text: str) -> bool:
-    low = text.strip().lower()
-    if low in ("1", "true", "yes", "on"):
-        return True
-    if low in ("0", "false", "no", "off"):
-        return False
-    raise argparse.ArgumentTypeError(f"expected true/false, got {text!r}")
+class NeurokitProcessorNode(ManagedNode):
+    """ROS 2 shell around :class:`ProcessingPipeline`: parameters, input streamer, output publishers."""
+
+    def __init__(self, config: ProcessorConfig, **kwargs: Any) -> None:
+        super().__init__(PROG, **kwargs)
+        self.config = cfg = self.declare_config(config)
+        self.prefix = cfg.resolved_output_prefix()
+        self.log = logic_logger(self.get_name(), self.get_logger())
+        self.outputs: dict[str, list[Streamer]] = {}
+        self.status_pub = self.create_publisher(String, f"{self.prefix}/status", event_qos())
+        self._open_outputs()
+        source = create_streamer(cfg.input, node=self, max_chunk=max(1, cfg.hop_samples))
+        self.pipeline = ProcessingPipeline(cfg, source, self.emit, self.log, consumers=self.consumer_count,
+                                           outputs_label=self.prefix)
+
+    def _open_outputs(self) -> None:
+        cfg = self.config
+        lsl_prefix = cfg.resolved_lsl_prefix()
+        for feature in (*SIGNAL_FEATURES[cfg.mode], *SCALARS[cfg.mode]):
+            rate = cfg.sampling_rate if feature in _SAMPLE_RATE_OUTPUTS else 0.0
+            topic = f"{self.prefix}/{feature}"
+            ros = create_streamer(f"ros:{topic}", node=self)
+            ros.open_output(StreamSpec(name=topic, nominal_rate=rate, channels=(feature,)))
+            sinks: list[Streamer] = [ros]
+            if cfg.lsl_output:
+                name = f"{lsl_prefix}/{feature}"
+                lsl = create_streamer(f"lsl:{name}")
+                lsl.open_output(StreamSpec(
+                    name=name, type=f"{cfg.mode.upper()}-{feature}", nominal_rate=rate,
+                    source_id=f"{PROG}{name}", channels=(feature,),
+                ))
+                sinks.append(lsl)
+            self.outputs[feature] = sinks
+
+    def consumer_count(self) -> int:
+        """Listeners on the least-listened ROS output (the status topic included)."""
+        counts = [sinks[0].consumer_count() for sinks in self.outputs.values()]
+        return min([*counts, self.status_pub.get_subscription_count()])
+
+    def emit(self, out: Output) -> None:
+        if isinstance(out, FrameOutput):
+            for sink in self.outputs[out.feature]:
+                sink.publish(out.frame)
+        elif isinstance(out, StatusOutput):
+            self.status_pub.publish(String(data=json.dumps(out.payload, allow_nan=False)))
+
+    def run(self, stop: threading.Event) -> int:
+        code = self.pipeline.run(stop)
+        if self.pipeline.processor.stats.samples_in:
+            self.get_logger().info(f"done: {json.dumps(self.pipeline.processor.stats.as_dict())}")
+        return code
+
+    def close(self) -> None:
+        self.pipeline.source.close()
+        for sinks in self.outputs.values():
+            for sink in sinks:
+                sink.close()  # a ROS output waits (up to 1 s) until its last frames are acknowledged
+        self.outputs.clear()
+        self.status_pub.wait_for_all_acked(Duration(seconds=1.0))
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog=PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog="Precedence: defaults < --conf file < command-line options < --ros-args parameters. "
-        "The seed's YAML keys (name, input, buffer, window, verbose) are accepted in --conf files.",
-    )
-    parser.add_argument("--conf", metavar="FILE", help="YAML file with the options below (flat keys)")
-    defaults = ProcessorConfig()
-    for f in dataclasses.fields(ProcessorConfig):
-        default = getattr(defaults, f.name)
-        kind = {bool: _to_bool, int: int, float: float}.get(type(default), str)
-        parser.add_argument(
-            "--" + f.name.replace("_", "-"), dest=f.name, type=kind, default=None,
-            help=f"{_HELP[f.name]} (default: {default!r})",
-        )
-    return parser
-
-
-def gather_options(args: argparse.Namespace) -> dict[str, Any]:
-    """--conf file, then command-line flags on top (both checked here, before ROS starts)."""
-    from hri_physio_bridge.nodes.common import CliError, load_yaml_conf
-
-    options: dict[str, Any] = {}
-    if args.conf:
-        conf = {str(k).replace("-", "_"): v for k, v in load_yaml_conf(args.conf, PROG).items()}
-        try:
-            conf = translate_seed_keys(conf, args.conf)
-        except ConfigError as exc:
-            raise CliError(str(exc)) from None
-        unknown = sorted(set(conf) - set(ProcessorConfig.KEYS))
-        if unknown:
-            raise CliError(f"{args.conf}: unknown option(s) {unknown}; known: {list(ProcessorConfig.KEYS)}")
-        options.update(conf)
-    options.update({k: v for k, v in vars(args).items() if k in ProcessorConfig.KEYS and v is not None})
-    return options
+def _make_node(config: ProcessorConfig, _args: argparse.Namespace) -> NeurokitProcessorNode:
+    return NeurokitProcessorNode(config)
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    from hri_physio_bridge.nodes.common import CliError, fail, install_stop_handlers, split_ros_args
-
-    ours, ros_args = split_ros_args(argv)
-    args = build_parser().parse_args(ours)
-    try:
-        options = gather_options(args)
-        ProcessorConfig.from_mapping(options, source=PROG)  # fail fast, before ROS starts
-    except (CliError, ConfigError) as exc:
-        fail(PROG, str(exc))
-
-    import rclpy
-    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-    from rclpy.signals import SignalHandlerOptions
-
-    from hri_physio_bridge.streamers import StreamerError
-    from hri_physio_processing.nodes.runner import NeurokitProcessorNode, ProcessorRunner
-
-    rclpy.init(args=[PROG, *ros_args], signal_handler_options=SignalHandlerOptions.NO)
-    node = None
-    executor = SingleThreadedExecutor()
-    spin: threading.Thread | None = None
-    code = 0
-
-    def spin_forever() -> None:
-        with contextlib.suppress(ExternalShutdownException, KeyboardInterrupt):
-            executor.spin()
-
-    try:
-        try:
-            node = NeurokitProcessorNode(options)
-            runner = ProcessorRunner(node)
-        except (ConfigError, ValueError, StreamerError) as exc:
-            fail(PROG, str(exc))
-        log = node.get_logger()
-        stop = install_stop_handlers(lambda name: log.info(f"{name} received: finishing the last window"))
-        executor.add_node(node)
-        spin = threading.Thread(target=spin_forever, name="ros-spin", daemon=True)
-        spin.start()
-        code = runner.run(stop)
-        # Reliable delivery of the last outputs before the publishers go away.
-        time.sleep(0.2)
-        log.info(f"done: {json.dumps(runner.processor.stats.as_dict())}")
-    finally:
-        if node is not None:
-            with contextlib.suppress(Exception):
-                node.close_outputs()
-        executor.shutdown(timeout_sec=1.0)
-        if spin is not None:
-            spin.join(timeout=2.0)
-        if node is not None:
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
-    return code
+    return run_node(
+        PROG, ProcessorConfig, _make_node, argv=argv, startup_errors=(StreamerError, ValueError),
+        description=__doc__, epilog="The seed's --conf keys buffer (samples per window) and window "
+        "(samples kept for the next window) are translated to window_seconds and hop_seconds.",
+    )
 
 
 if __name__ == "__main__":

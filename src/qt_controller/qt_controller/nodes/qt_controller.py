@@ -1,7 +1,10 @@
 """qt_controller: text commands on /QtController/input -> the QT robot (real or mock).
 
-Every command line gets one JSON reply on /QtController/output:
+Every command line gets one JSON reply on /QtController/output, in order:
 ``{"t": <ROS time>, "ok": true|false, "command": "<the line>", "message": "...", "data": {...}}``.
+Lines are taken into the controller's own queue as they arrive (reliable, KEEP_ALL), so a
+burst loses none; a line beyond ``command_queue_limit`` is answered ``overloaded``.
+``exit`` on the topic is refused unless ``allow_remote_exit`` is set.
 
 Examples::
 
@@ -13,194 +16,107 @@ Examples::
 from __future__ import annotations
 
 import argparse
-import contextlib
-import dataclasses
 import json
 import sys
 import threading
 from typing import Any
 
-import rclpy
 from rclpy.duration import Duration
-from rclpy.exceptions import NameValidationException, ParameterException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-from rclpy.node import Node
-from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import String
 
-from hri_physio_bridge.nodes.common import (
-    CliError,
-    fail,
-    install_stop_handlers,
-    load_yaml_conf,
-    logic_logger,
-    split_ros_args,
-)
+from hri_physio_bridge.config import ConfigError
+from hri_physio_bridge.node_runner import ManagedNode, logic_logger, run_node
+from hri_physio_bridge.qos import command_qos
 from qt_controller.commands import HELP_TEXT
+from qt_controller.config import QtControllerConfig
 from qt_controller.manager import Reply, RobotManager
-from qt_controller.nodes.params import declare_options
-from qt_controller.qt_robot import QtController, QtControllerOptions
+from qt_controller.qt_controller import QtController
 
 PROG = "qt_controller"
-NODE_OPTIONS: dict[str, Any] = {
-    "input_topic": "/QtController/input",
-    "output_topic": "/QtController/output",
-    **{
-        k: (list(v) if isinstance(v, list) else v)
-        for k, v in dataclasses.asdict(QtControllerOptions()).items()
-    },
-}
-DESCRIPTIONS = {
-    "input_topic": "command lines (std_msgs/String)",
-    "output_topic": "one JSON reply per command (std_msgs/String)",
-    "speech_channel": "talkText (speech with lip animation) or say (voice only)",
-    "language": "speech language sent with speech configuration",
-    "service_backend": "auto | qt (QT's service types) | json (std_msgs request/reply topics)",
-    "service_timeout": "seconds to wait for a robot service (appearing and answering)",
-    "discovery_timeout": "seconds to wait for a listener before a topic command fails",
-    "require_listeners": "fail topic commands nobody listens to",
-    "extra_emotions": "emotion names the robot has beyond QT's standard set",
-    "joint_limits": "joint limit overrides, Joint:min:max,...",
-}
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog=PROG,
-        description="Drive the QT robot (or mock_qt_robot) from text commands on /QtController/input; "
-        "replies go to /QtController/output as JSON.",
-        epilog="Precedence: defaults < --conf file < command-line options < --ros-args parameters.\n\n"
-        + HELP_TEXT,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    parser.add_argument("--conf", help="YAML file with node options (flat, or a ROS params file)")
-    parser.add_argument(
-        "--interactive", action="store_true", help="also read commands from stdin (end with 'exit' or Ctrl-D)"
-    )
-    parser.add_argument(
-        "--service-backend",
-        choices=("auto", "qt", "json"),
-        default=None,
-        help="how QT's services are reached (default: auto)",
-    )
-    parser.add_argument(
-        "--speech-channel", choices=("talkText", "say"), default=None, help="speech topic (default: talkText)"
-    )
-    return parser
+class QtControllerNode(ManagedNode):
+    """ROS 2 shell: parameters, the QtController robot, the command queue, the reply topic."""
 
-
-class QtControllerNode(Node):
-    """ROS 2 shell: parameters, the QtController robot, the manager thread, the reply topic."""
-
-    def __init__(self, options: dict[str, Any], **kwargs: Any) -> None:
-        super().__init__("qt_controller", **kwargs)
-        values = declare_options(self, NODE_OPTIONS, options, DESCRIPTIONS)
+    def __init__(self, config: QtControllerConfig, **kwargs: Any) -> None:
+        super().__init__(PROG, **kwargs)
+        self.config = cfg = self.declare_config(config)
         self.log = logic_logger(self.get_name(), self.get_logger())
         self.robot = QtController(self, self.log)
-        result = self.robot.configure({k: values[k] for k in QtControllerOptions.KEYS})
+        result = self.robot.configure(cfg.robot_options())
         if not result:
-            raise ValueError(result.message)
+            raise ConfigError(result.message)
         self.get_logger().info(result.message)
-        self.manager = RobotManager(self.robot, self.log)
-        self.output = self.create_publisher(String, values["output_topic"], 50)
-        self.create_subscription(String, values["input_topic"], self._on_input, 50)
-        self.echo = False
-        self._stop = threading.Event()
+        self.manager = RobotManager(self.robot, self.log, allow_remote_exit=cfg.allow_remote_exit,
+                                    queue_limit=cfg.command_queue_limit)
+        self.echo = cfg.interactive
+        self._publish_lock = threading.Lock()  # replies come from the manager and the callbacks
+        self.output = self.create_publisher(String, cfg.output_topic, command_qos())
+        self.create_subscription(String, cfg.input_topic, self._on_input, command_qos())
         self._worker: threading.Thread | None = None
 
     def _on_input(self, msg: String) -> None:
-        self.robot.push_command(msg.data)
+        self.submit(msg.data, remote=True)
+
+    def submit(self, line: str, *, remote: bool) -> None:
+        """Queue a line; one that cannot be queued is answered at once."""
+        immediate = self.manager.submit(line, remote=remote)
+        if immediate is not None:
+            self.publish_reply(immediate)
 
     def publish_reply(self, reply: Reply) -> None:
         t = self.get_clock().now().nanoseconds * 1e-9
-        self.output.publish(String(data=json.dumps(reply.as_dict(t))))
+        with self._publish_lock:
+            self.output.publish(String(data=json.dumps(reply.as_dict(t))))
         if self.echo:
             print(("ok: " if reply.ok else "error: ") + reply.message, flush=True)
 
-    def start(self) -> None:
-        self._worker = threading.Thread(
-            target=self.manager.run, args=(self.publish_reply, self._stop), name="robot-manager", daemon=True
-        )
+    def start(self, stop: threading.Event) -> None:
+        """Handle queued lines on a worker thread until ``exit`` or ``stop``."""
+        self._worker = threading.Thread(target=self.manager.run, args=(self.publish_reply, stop),
+                                        name="robot-manager", daemon=True)
         self._worker.start()
 
-    def stop(self) -> None:
-        self._stop.set()
+    def join(self, timeout: float = 5.0) -> None:
         if self._worker is not None:
-            self._worker.join(timeout=5.0)
-        self.output.wait_for_all_acked(Duration(seconds=1))  # let the last reply (e.g. to exit) out
+            self._worker.join(timeout)
 
-    @property
-    def exit_requested(self) -> bool:
-        return self.manager.exit_requested
+    def run(self, stop: threading.Event) -> int:
+        self.start(stop)
+        if self.config.interactive:
+            threading.Thread(target=_console, args=(self,), name="console", daemon=True).start()
+        self.get_logger().info(f"listening for commands on {self.config.input_topic}")
+        while self._worker is not None and self._worker.is_alive():
+            if stop.wait(0.1):
+                break
+        self.join()
+        if self.manager.exit_requested:
+            self.get_logger().info("exit command received: exiting")
+        return 0
+
+    def close(self) -> None:
+        self.output.wait_for_all_acked(Duration(seconds=1))  # let the last replies (e.g. to exit) out
 
 
-def _console(node: QtControllerNode, stop: threading.Event, stream: Any = sys.stdin) -> None:
+def _console(node: QtControllerNode, stream: Any = None) -> None:
+    stream = sys.stdin if stream is None else stream
     print("type commands ('help' lists them, 'exit' quits)", flush=True)
     for line in stream:
         if line.strip():
-            node.robot.push_command(line)
-    node.robot.push_command("exit")  # stdin closed
+            node.submit(line, remote=False)
+    node.submit("exit", remote=False)  # stdin closed
 
 
-def _options_from(args: argparse.Namespace) -> dict[str, Any]:
-    options = load_yaml_conf(args.conf, PROG) if args.conf else {}
-    unknown = sorted(set(options) - set(NODE_OPTIONS))
-    if unknown:
-        raise CliError(f"{args.conf}: unknown option(s) {unknown}; known: {sorted(NODE_OPTIONS)}")
-    if args.service_backend is not None:
-        options["service_backend"] = args.service_backend
-    if args.speech_channel is not None:
-        options["speech_channel"] = args.speech_channel
-    return options
+def _make_node(config: QtControllerConfig, _args: argparse.Namespace) -> QtControllerNode:
+    return QtControllerNode(config)
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    ours, ros_args = split_ros_args(argv)
-    args = build_parser().parse_args(ours)
-    try:
-        options = _options_from(args)
-    except CliError as exc:
-        fail(PROG, str(exc))
-
-    rclpy.init(args=[PROG, *ros_args], signal_handler_options=SignalHandlerOptions.NO)
-    node: QtControllerNode | None = None
-    executor = SingleThreadedExecutor()
-    spin: threading.Thread | None = None
-    try:
-        try:
-            node = QtControllerNode(options)
-        except (ValueError, ParameterException, NameValidationException) as exc:
-            fail(PROG, str(exc))
-        log = node.get_logger()
-        stop = install_stop_handlers(lambda name: log.info(f"{name} received: exiting"))
-        executor.add_node(node)
-        spin = threading.Thread(target=_spin, args=(executor,), name="ros-spin")
-        spin.start()
-        node.echo = args.interactive
-        node.start()
-        if args.interactive:
-            threading.Thread(target=_console, args=(node, stop), daemon=True).start()
-        log.info(f"listening for commands on {node.get_parameter('input_topic').value}")
-        while not stop.wait(0.1):
-            if node.exit_requested:
-                log.info("exit command received: exiting")
-                break
-        node.stop()
-    finally:
-        executor.shutdown(timeout_sec=1.0)
-        if spin is not None:
-            spin.join(timeout=2.0)
-        if node is not None:
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
-    return 0
-
-
-def _spin(executor: SingleThreadedExecutor) -> None:
-    with contextlib.suppress(ExternalShutdownException, KeyboardInterrupt):
-        executor.spin()
+    return run_node(
+        PROG, QtControllerConfig, _make_node, argv=argv, startup_errors=(ValueError,),
+        description="Drive the QT robot (or mock_qt_robot) from text commands on /QtController/input; "
+        "one JSON reply per line goes to /QtController/output.", epilog=HELP_TEXT,
+    )
 
 
 if __name__ == "__main__":

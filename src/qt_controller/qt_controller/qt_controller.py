@@ -6,17 +6,16 @@ against the joint limits, and (``require_listeners``) that someone listens on a 
 so a researcher is told "nobody listens on /qt_robot/emotion/show" instead of a command
 silently going nowhere. Topic sends wait up to ``discovery_timeout`` for a listener and
 service calls up to ``service_timeout`` (wall-clock seconds, as they bound transport and
-discovery, not robot behaviour).
+discovery, not robot behaviour). Commands go out reliable and KEEP_ALL (``command_qos``):
+a burst of them reaches the robot whole.
 """
 
 from __future__ import annotations
 
 import logging
-import queue
 import threading
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
 from typing import Any
 
 from rclpy.node import Node
@@ -24,7 +23,12 @@ from rclpy.publisher import Publisher
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 
+from hri_physio_bridge import topics
+from hri_physio_bridge.config import ConfigError
+from hri_physio_bridge.qos import command_qos
+from hri_physio_bridge.waiting import Clock, wait_until
 from qt_controller import qt_services
+from qt_controller.config import QtRobotOptions
 from qt_controller.emotions import STANDARD_EMOTIONS, EmotionCatalogue
 from qt_controller.joint_limits import (
     PART_QT_NAME,
@@ -37,61 +41,23 @@ from qt_controller.joint_limits import (
 )
 from qt_controller.robot_interface import Outcome, RobotInterface
 
-SPEECH_TOPICS = {"talkText": "/qt_robot/behavior/talkText", "say": "/qt_robot/speech/say"}
-EMOTION_TOPIC = "/qt_robot/emotion/show"
-JOINT_STATE_TOPIC = "/qt_robot/joints/state"
-AUDIO_TOPIC = "/audio_streamer/audio_name"
-VIDEO_TOPIC = "/video_streamer/video_name"
+SPEECH_TOPICS = {"talkText": topics.QT_TALK_TEXT, "say": topics.QT_SPEECH_SAY}
 
 
 def part_topic(part: str) -> str:
-    return f"/qt_robot/{PART_TOPIC_STEM[part]}_position/command"
-
-
-@dataclass
-class QtControllerOptions:
-    speech_channel: str = "talkText"  # talkText: speak with lip animation; say: voice only
-    language: str = "en-US"
-    service_backend: str = "auto"
-    service_timeout: float = 10.0
-    discovery_timeout: float = 2.0
-    require_listeners: bool = True
-    extra_emotions: list[str] = field(default_factory=list)
-    joint_limits: str = ""  # overrides, "Joint:min:max,..."
-
-    KEYS = (
-        "speech_channel",
-        "language",
-        "service_backend",
-        "service_timeout",
-        "discovery_timeout",
-        "require_listeners",
-        "extra_emotions",
-        "joint_limits",
-    )
-
-    def validate(self) -> None:
-        if self.speech_channel not in SPEECH_TOPICS:
-            raise ValueError(
-                f"speech_channel must be one of {', '.join(SPEECH_TOPICS)}, not {self.speech_channel!r}"
-            )
-        if self.service_backend not in qt_services.BACKENDS:
-            raise ValueError(f"service_backend must be one of {', '.join(qt_services.BACKENDS)}")
-        for name in ("service_timeout", "discovery_timeout"):
-            if not getattr(self, name) >= 0:
-                raise ValueError(f"{name} must be >= 0 seconds")
+    return topics.qt_joint_command(PART_TOPIC_STEM[part])
 
 
 class QtController(RobotInterface):
     """The real QT robot (or mock_qt_robot) driven through ``node``."""
 
-    def __init__(self, node: Node, log: logging.Logger | None = None) -> None:
+    def __init__(self, node: Node, log: logging.Logger | None = None, clock: Clock = time.monotonic) -> None:
         super().__init__("QtController", log)
         self.node = node
-        self.options = QtControllerOptions()
+        self.options = QtRobotOptions()
         self.limits = JointLimits.default()
         self.emotions = EmotionCatalogue()
-        self._commands: queue.Queue[str] = queue.Queue()
+        self._clock = clock
         self._lock = threading.Lock()
         self._joint_state: JointState | None = None
         self._emotion: tuple[str, float] | None = None
@@ -102,10 +68,10 @@ class QtController(RobotInterface):
 
     # ------------------------------------------------------------------ setup
     def configure(self, options: Mapping[str, Any]) -> Outcome:
-        unknown = sorted(set(options) - set(QtControllerOptions.KEYS))
-        if unknown:
-            return Outcome.failure(f"unknown option(s) {unknown}; known: {list(QtControllerOptions.KEYS)}")
-        opts = QtControllerOptions(**options)
+        try:
+            opts = QtRobotOptions.from_mapping(options, "QtController options")
+        except ConfigError as exc:
+            return Outcome.failure(str(exc))
         specs = {
             "gesture": qt_services.GESTURE_PLAY,
             "speech_config": qt_services.SPEECH_CONFIG,
@@ -113,27 +79,26 @@ class QtController(RobotInterface):
             "velocity": qt_services.SET_VELOCITY,
         }
         try:
-            opts.validate()
             limits = JointLimits.default().with_overrides(parse_limit_overrides(opts.joint_limits))
             services = {
-                key: qt_services.ServiceClient(self.node, spec, opts.service_backend)
+                key: qt_services.ServiceClient(self.node, spec, opts.service_backend, clock=self._clock)
                 for key, spec in specs.items()
             }
-        except (ValueError, JointLimitError) as exc:
+        except ValueError as exc:  # JointLimitError, or backend 'qt' without QT's packages
             return Outcome.failure(str(exc))
         self.options, self.limits, self._services = opts, limits, services
         self.emotions = EmotionCatalogue([*STANDARD_EMOTIONS, *opts.extra_emotions])
-        topics = {
+        names = {
             "speech": SPEECH_TOPICS[opts.speech_channel],
-            "emotion": EMOTION_TOPIC,
-            "audio": AUDIO_TOPIC,
-            "video": VIDEO_TOPIC,
+            "emotion": topics.QT_EMOTION,
+            "audio": topics.AUDIO_REQUEST,
+            "video": topics.VIDEO_REQUEST,
         }
-        for key, topic in topics.items():
-            self._pubs[key] = self.node.create_publisher(String, topic, 10)
+        for key, topic in names.items():
+            self._pubs[key] = self.node.create_publisher(String, topic, command_qos())
         for part in PARTS:
-            self._pubs[part] = self.node.create_publisher(Float64MultiArray, part_topic(part), 10)
-        self.node.create_subscription(JointState, JOINT_STATE_TOPIC, self._on_joint_state, 10)
+            self._pubs[part] = self.node.create_publisher(Float64MultiArray, part_topic(part), command_qos())
+        self.node.create_subscription(JointState, topics.QT_JOINT_STATE, self._on_joint_state, 10)
         self._configured = True
         backend = services["gesture"].backend
         return Outcome.success(f"QT robot interface ready (service backend: {backend})", backend=backend)
@@ -142,28 +107,16 @@ class QtController(RobotInterface):
         with self._lock:
             self._joint_state = msg
 
-    # ------------------------------------------------------------------ command queue
-    def push_command(self, text: str) -> None:
-        """Queue a command line (from /QtController/input or the console)."""
-        self._commands.put(text)
-
-    def get_robot_command(self, timeout: float | None = None) -> str | None:
-        try:
-            return self._commands.get(timeout=timeout)
-        except queue.Empty:
-            return None
-
     # ------------------------------------------------------------------ helpers
     def _send(self, key: str, msg: Any, what: str) -> Outcome:
         if not self._configured:
             return Outcome.failure("the QT robot interface is not configured")
         pub = self._pubs[key]
-        if self.options.require_listeners:
-            deadline = time.monotonic() + self.options.discovery_timeout
-            while pub.get_subscription_count() == 0:
-                if time.monotonic() >= deadline:
-                    return Outcome.failure(f"nobody listens on {pub.topic_name} (is the robot running?)")
-                time.sleep(0.02)
+        if self.options.require_listeners and not wait_until(
+            lambda: pub.get_subscription_count() > 0, self.options.discovery_timeout, clock=self._clock,
+            poll=0.02,
+        ):
+            return Outcome.failure(f"nobody listens on {pub.topic_name} (is the robot running?)")
         pub.publish(msg)
         return Outcome.success(f"{what} sent to {pub.topic_name}")
 
@@ -254,11 +207,11 @@ class QtController(RobotInterface):
             return Outcome.failure(str(exc))
         latest = self._latest_joints()
         if latest is None:
-            return Outcome.failure(f"no joint state received on {JOINT_STATE_TOPIC} yet")
+            return Outcome.failure(f"no joint state received on {topics.QT_JOINT_STATE} yet")
         pos, _vel, stamp = latest
         missing = [j for j in PARTS[part] if j not in pos]
         if missing:
-            return Outcome.failure(f"joint state on {JOINT_STATE_TOPIC} lacks {', '.join(missing)}")
+            return Outcome.failure(f"joint state on {topics.QT_JOINT_STATE} lacks {', '.join(missing)}")
         values = [pos[j] for j in PARTS[part]]
         text = ", ".join(f"{j} {v:.1f}" for j, v in zip(PARTS[part], values, strict=True))
         return Outcome.success(
