@@ -17,11 +17,11 @@ from media_helpers import VirtualClock, capture_logger, measure_tempo, write_dru
 from audio_video_streamers.audio import stretch as stretch_module
 from audio_video_streamers.audio.library import AudioLibrary
 from audio_video_streamers.audio.player import AudioPlayer
-
-pytestmark = pytest.mark.integration
 from audio_video_streamers.audio.sinks import NullSink, RecordingSink
 from audio_video_streamers.audio.stretch import StretchCache, nearest_octave
 from audio_video_streamers.status import MediaStatus, State
+
+pytestmark = pytest.mark.integration
 
 RATE = 44100
 SOURCE_BPM = 100.0
