@@ -22,7 +22,7 @@ RUNTIME_SHELLS = (
     "hri_physio_bridge.streamers.ros", "hri_physio_bridge.streamers.lsl",
     "hri_physio_bridge.bag", "hri_physio_bridge.bag.*",
     "hri_physio_bridge.polar", "hri_physio_bridge.polar.bleak_ble", "hri_physio_bridge.polar.lsl_output",
-    "hri_physio_coach.session", "hri_physio_coach.paths",
+    "hri_physio_coach.session",
     "qt_controller.qt_robot", "qt_controller.qt_controller", "qt_controller.qt_services",
 )
 

@@ -1,4 +1,4 @@
-"""qt_physio_coach as a ROS 2 node: CLI, start/stop, and the whole session under sim time.
+"""qt_physio_coach as a ROS 2 node: CLI, start/stop, control lines, not alone, the whole session.
 
 The integration test runs the robot side as a researcher would (qt_controller +
 mock_qt_robot, all on sim time) with the coach, publishes /clock and scripted HR frames
@@ -20,12 +20,14 @@ from typing import Any
 import pytest
 
 from helpers import NodeProcess, wait_until
+from hri_physio_bridge import topics
 from hri_physio_bridge.ros_tools import ExecutorThread, clock_message
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.integration]
 
 BIN = Path(sys.prefix) / "bin"
 SIM_START = 1000.0
+CLOCK = "/clock"  # rclpy.time_source.CLOCK_TOPIC
 
 
 def run(*args: str, timeout: float = 30) -> subprocess.CompletedProcess:
@@ -45,14 +47,20 @@ def test_help() -> None:
 @pytest.mark.parametrize(
     "args,message",
     [
-        (["--ros-args", "-p", "part_age:=0.0"], "part_age must be in (0, 120] years, got 0"),
-        (["--ros-args", "-p", "part_age:=130"], "part_age must be in (0, 120] years, got 130"),
+        (["--ros-args", "-p", "part_age:=0.0"], "part_age: expected greater than 0"),
+        (["--ros-args", "-p", "part_age:=130"], "part_age: expected less than or equal to 120"),
+        (["--ros-args", "-p", "part_age:=abc"], "part_age: expected a valid number"),
+        (["--ros-args", "-p", "calib_skip:=maybe"], "calib_skip: expected a valid boolean"),
         (["--ros-args", "-p", "zone_low:=0.8"], "zone bounds out of order"),
-        (["--ros-args", "-p", "policy:=pid"], "unknown policy 'pid'"),
-        (["--conf", "EMPTY_LADDER"], "empty speed ladder"),
+        (["--ros-args", "-p", "policy:=pid"], "policy: expected 'threshold'"),
+        (["--ros-args", "-p", "speed_modifier:=[1.0]"], "one music tempo per gesture speed"),
+        (["--ros-args", "-p", "part_agee:=30.0"], "unknown parameter(s) part_agee"),
+        (["--ros-args", "--params-file", "/nonexistent/p.yaml"], "/nonexistent/p.yaml does not exist"),
+        (["--part-age", "old"], "part_age: expected a valid number"),
+        (["--conf", "EMPTY_LADDER"], "speed_modifier: List should have at least 1 item"),
         (["--conf", "/nonexistent/coach.yaml"], "configuration file /nonexistent/coach.yaml does not exist"),
         (["--ros-args", "-p", "routine_file:=/nonexistent/routine.yaml"], "does not exist"),
-        (["--ros-args", "-p", "tick_period:=0.0"], "tick_period must be > 0"),
+        (["--ros-args", "-p", "tick_period:=0.0"], "tick_period: expected greater than 0"),
     ],
 )
 def test_invalid_configuration_is_one_clear_line(args: list[str], message: str, tmp_path: Path) -> None:
@@ -87,31 +95,27 @@ class Probe:
 
     def __init__(self, context: Any, hr_topic: str) -> None:
         from rclpy.node import Node
-        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
         from rosgraph_msgs.msg import Clock
         from std_msgs.msg import Float64MultiArray, String
 
-        from hri_physio_bridge.qos import frame_qos
+        from hri_physio_bridge.qos import command_qos, frame_qos, latched_qos
 
         self.node = Node("coach_test_probe", context=context)
-        self.clock_pub = self.node.create_publisher(Clock, "/clock", 10)
+        self.clock_pub = self.node.create_publisher(Clock, CLOCK, 10)
         self.hr_pub = self.node.create_publisher(Float64MultiArray, hr_topic, frame_qos())
-        self.control = self.node.create_publisher(String, "/coach/control", 10)
-        self.input = self.node.create_publisher(String, "/QtController/input", 10)
+        self.control = self.node.create_publisher(String, topics.COACH_CONTROL, command_qos())
+        self.input = self.node.create_publisher(String, topics.QT_COMMANDS, 10)
         self.lock = threading.Lock()
         self.coach_events: list[dict[str, Any]] = []
         self.mock_events: list[dict[str, Any]] = []
         self.commands: list[str] = []
         self.replies: list[dict[str, Any]] = []
-        self.node.create_subscription(String, "/coach/events", self._add(self.coach_events, True), 5000)
-        self.node.create_subscription(String, "/qt_robot/mock/events", self._add(self.mock_events, True),
-                                      5000)
-        self.node.create_subscription(String, "/QtController/input", self._add(self.commands, False), 5000)
-        self.node.create_subscription(String, "/QtController/output", self._add(self.replies, True), 5000)
+        self.node.create_subscription(String, topics.COACH_EVENTS, self._add(self.coach_events, True), 5000)
+        self.node.create_subscription(String, topics.QT_MOCK_EVENTS, self._add(self.mock_events, True), 5000)
+        self.node.create_subscription(String, topics.QT_COMMANDS, self._add(self.commands, False), 5000)
+        self.node.create_subscription(String, topics.QT_REPLIES, self._add(self.replies, True), 5000)
         self.states: list[dict[str, Any]] = []
-        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.node.create_subscription(String, "/coach/state", self._add(self.states, True), latched)
+        self.node.create_subscription(String, topics.COACH_STATE, self._add(self.states, True), latched_qos())
         self._spinner = ExecutorThread(self.node, context=context)
 
     def _add(self, into: list, parse: bool):
@@ -162,7 +166,8 @@ def test_interactive_waits_for_start_on_stdin_and_stops_on_sigterm(probe: Probe)
     with NodeProcess("qt_physio_coach", "--interactive", "--ros-args", "-p", "hr_topic:=/test/coach/hr",
                      stdin=subprocess.PIPE) as coach:
         coach.wait_for_output("waiting for 'start'")
-        wait_until(lambda: probe.node.count_subscribers("/coach/control") > 0, 20, "the coach to subscribe")
+        wait_until(lambda: probe.node.count_subscribers(topics.COACH_CONTROL) > 0, 20,
+                   "the coach to subscribe")
         time.sleep(1.0)
         assert not probe.events("session_start"), "started before 'start'"
         assert coach.proc.stdin is not None
@@ -203,6 +208,127 @@ def test_start_on_the_control_topic_and_sigint(probe: Probe) -> None:
         wait_until(lambda: probe.events("session_start"), 20, "session_start after 'start' on /coach/control")
         assert coach.stop(signal.SIGINT) == 0, coach.output
         assert "Traceback" not in coach.output
+
+
+# --- control lines: every one handled, also in a burst --------------------------------------------
+def test_every_control_line_of_a_burst_is_handled_and_counted(probe: Probe) -> None:
+    from std_msgs.msg import String
+
+    burst = 10_000
+    args = ("--interactive", "--ros-args", "-p", "hr_topic:=/test/coach/hr")
+    with NodeProcess("qt_physio_coach", *args) as coach:
+        coach.wait_for_output("waiting for 'start'")
+        wait_until(lambda: probe.control.get_subscription_count() > 0, 20, "the coach to subscribe")
+        for i in range(burst):
+            probe.control.publish(String(data=f"jump {i}"))
+        probe.control.publish(String(data="start"))  # the line after the burst is not lost either
+
+        def counted() -> dict[str, Any]:
+            with probe.lock:
+                return probe.states[-1] if probe.states else {}
+
+        wait_until(lambda: counted().get("control", {}).get("received") == burst + 1, 120,
+                   lambda: f"every control line counted; last state {counted()}\n{coach.output[-2000:]}")
+        state = counted()
+        assert state["control"] == {"received": burst + 1, "unknown": burst}
+        wait_until(lambda: counted().get("state") == "running", 30, "the start after the burst")
+        assert coach.stop(signal.SIGTERM) == 0, coach.output
+    warnings = [line for line in coach.output.splitlines() if "unknown control line" in line]
+    assert 1 <= len(warnings) < 20, "warnings about unknown words are rate-limited"
+    assert "Traceback" not in coach.output
+
+
+def test_stop_on_the_control_topic_before_the_start_ends_the_node(probe: Probe) -> None:
+    from std_msgs.msg import String
+
+    args = ("--interactive", "--ros-args", "-p", "hr_topic:=/test/coach/hr")
+    with NodeProcess("qt_physio_coach", *args) as coach:
+        coach.wait_for_output("waiting for 'start'")
+        wait_until(lambda: probe.control.get_subscription_count() > 0, 20, "the coach to subscribe")
+        probe.control.publish(String(data="stop"))
+        assert coach.wait(30) == 0, coach.output
+        assert not probe.events("session_start")
+        assert "stopped before the session started" in coach.output
+
+
+# --- not alone: a second coach or a second clock on the same domain --------------------------------
+def test_two_coaches_on_one_domain_both_say_so_and_stop(probe: Probe) -> None:
+    from std_msgs.msg import String
+
+    args = ("--interactive", "--ros-args", "-p", "hr_topic:=/test/coach/hr")
+    first = NodeProcess("qt_physio_coach", *args, "-p", "part_name:=First")
+    second = NodeProcess("qt_physio_coach", *args, "-p", "part_name:=Second")
+    with first, second:
+        for coach in (first, second):
+            coach.wait_for_output("waiting for 'start'")
+        # Each coach's latched state reaching the probe shows that the probe has matched that
+        # coach's endpoints, so its conflict event will reach the probe too.
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+        seen: set[str] = set()
+        qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        probe.node.create_subscription(String, topics.COACH_STATE,
+                                       lambda msg: seen.add(json.loads(msg.data)["participant"]), qos)
+        wait_until(lambda: len(seen) == 2 and probe.control.get_subscription_count() >= 2, 30,
+                   "both coaches' states")
+        probe.control.publish(String(data="start"))  # one launcher's start reaches both
+        codes = (first.wait(90), second.wait(90))
+        assert codes == (1, 1), (first.output, second.output)
+    wait_until(lambda: len(probe.events("conflict")) >= 2, 20,
+               lambda: f"both conflict events: {probe.events('conflict')}\n{first.output}\n{second.output}")
+    conflicts = probe.events("conflict")
+    assert {e["conflict"] for e in conflicts} == {"second_coach"}
+    assert len({e["participant"] for e in conflicts}) == 2  # one from each coach
+    assert all("qt_physio_coach" in " ".join(e["publishers"]) for e in conflicts)
+    stopped = probe.events("session_stopped")
+    assert stopped and all(e["reason"] == "conflict: second_coach" for e in stopped)
+    for coach in (first, second):
+        assert "another session shares this ROS domain" in coach.output and "Traceback" not in coach.output
+
+
+def test_a_second_clock_stops_the_coach_but_a_replaced_one_does_not(probe: Probe) -> None:
+    from rosgraph_msgs.msg import Clock
+
+    args = ("--ros-args", "-p", "use_sim_time:=true", "-p", "hr_topic:=/test/coach/hr",
+            "-p", "tick_period:=0.25")
+    with NodeProcess("qt_physio_coach", *args) as coach:
+        coach.wait_for_output("participant P-")
+        # The coach's time source and its clock watch.
+        wait_until(lambda: probe.clock_pub.get_subscription_count() >= 2, 30, "the coach on /clock")
+        t = SIM_START
+        first = probe.clock_pub
+        while not probe.events("session_start"):
+            t += 0.25
+            first.publish(clock_message(t))
+            time.sleep(0.01)
+            assert t < SIM_START + 600, coach.output
+        t0 = probe.events("session_start")[0]["t"]
+        # The launcher restarts: a new clock publisher replaces the first, which is gone.
+        probe.node.destroy_publisher(first)
+        replacement = probe.node.create_publisher(Clock, CLOCK, 10)
+        wait_until(lambda: replacement.get_subscription_count() >= 2, 30, "the coach on the new clock")
+        while not any(e["t"] >= t0 + 30.0 for e in probe.events("command")):  # the splash video at 30 s
+            t += 0.25
+            replacement.publish(clock_message(t))
+            time.sleep(0.01)
+            assert coach.proc.poll() is None and t < t0 + 600, coach.output
+        assert not probe.events("conflict")
+        # Now a second clock takes turns with it: two sessions on one domain.
+        intruder = probe.node.create_publisher(Clock, CLOCK, 10)
+        wait_until(lambda: intruder.get_subscription_count() >= 2, 30, "the coach on the second clock")
+        while coach.proc.poll() is None:
+            t += 0.25
+            replacement.publish(clock_message(t))
+            intruder.publish(clock_message(t + 40.0))
+            time.sleep(0.01)
+            assert t < t0 + 3000, coach.output
+        assert coach.wait(10) == 1, coach.output
+    wait_until(lambda: probe.events("conflict"), 20, "the conflict event")
+    (conflict,) = probe.events("conflict")
+    assert conflict["conflict"] == "second_clock" and conflict["topic"] == CLOCK
+    assert probe.events("session_stopped")[0]["reason"] == "conflict: second_clock"
+    assert "Traceback" not in coach.output
 
 
 # --- the whole session under sim time ------------------------------------------------------------

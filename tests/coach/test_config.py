@@ -1,28 +1,75 @@
-"""Coach configuration: the seed's keys, validation with clear errors, participant ids."""
+"""Coach and participant configuration: declared once, the seed's keys, clear errors, participant ids."""
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import pytest
 import yaml
 
+from hri_physio_bridge import config as bridge_config
+from hri_physio_bridge import topics
+from hri_physio_bridge.config import ConfigError
 from hri_physio_coach.coach import CoachError, ExerciseCoach, load_coach_routine
-from hri_physio_coach.config import (
-    CoachConfig,
-    ConfigError,
-    config_from_mapping,
-    load_config,
-    participant_id,
-)
+from hri_physio_coach.config import COACH_NODE, CoachConfig, CoachNodeConfig, load_config, participant_id
+from hri_physio_coach.participant.physiology import ParticipantParams
+from hri_physio_coach.participant_config import PARTICIPANT_NODE, ParticipantNodeConfig
 from hri_physio_coach.paths import default_config_file, default_routine_file
+from hri_physio_coach.policies import POLICY_NAMES
 from hri_physio_coach.routine import parse_routine
 
 
 def test_packaged_config_is_the_defaults() -> None:
     assert load_config(default_config_file()) == CoachConfig()
     raw = yaml.safe_load(default_config_file().read_text())
-    assert set(raw) == set(CoachConfig().as_dict())  # the file documents every key
+    assert set(raw) == set(CoachConfig.model_fields)  # the file documents every key
+    assert CoachNodeConfig.from_file(default_config_file(), COACH_NODE) == CoachNodeConfig()
+
+
+def test_one_configuration_error_type() -> None:
+    import hri_physio_coach.config as coach_config
+
+    assert coach_config.ConfigError is bridge_config.ConfigError
+    for gone in ("read_config_file", "SCALAR_KEYS", "_coerce", "config_from_mapping"):
+        assert not hasattr(coach_config, gone), gone
+
+
+def test_every_option_is_declared_with_its_help() -> None:
+    for cls in (CoachNodeConfig, ParticipantNodeConfig):
+        for name, info in cls.model_fields.items():
+            assert info.description, f"{cls.__name__}.{name} has no help text"
+    assert set(CoachConfig.SEED_KEYS) <= set(CoachConfig.model_fields)
+    described = CoachConfig.describe("resting_default")
+    assert "[bpm]" in described and ">= 20" in described and "(default: 61.0)" in described
+    assert CoachNodeConfig.kind("policy") == "choice" and CoachNodeConfig.kind("speed_modifier") == "list"
+
+
+def test_node_options_default_to_the_system_topics() -> None:
+    cfg = CoachNodeConfig()
+    assert (cfg.hr_topic, cfg.command_topic, cfg.reply_topic) == (
+        topics.POLAR_H10_HR, topics.QT_COMMANDS, topics.QT_REPLIES)
+    assert (cfg.events_topic, cfg.state_topic, cfg.control_topic) == (
+        topics.COACH_EVENTS, topics.COACH_STATE, topics.COACH_CONTROL)
+    assert (cfg.interactive, cfg.tick_period) == (False, 0.1)
+    node = load_config(None, {"policy": "fuzzy", "hr_topic": "/x"}, CoachNodeConfig)
+    assert isinstance(node, CoachNodeConfig) and (node.policy, node.hr_topic) == ("fuzzy", "/x")
+    with pytest.raises(ConfigError, match="unknown option"):
+        load_config(None, {"hr_topic": "/x"})  # a session option is not a node option
+
+
+def test_flags_and_help_come_from_the_declaration() -> None:
+    from hri_physio_bridge.node_runner import build_parser  # argparse only; no ROS node is made
+
+    parser = build_parser(COACH_NODE, CoachNodeConfig, default_conf=default_config_file())
+    text = parser.format_help()
+    for flag in ("--interactive", "--policy", "--hr-topic", "--part-age", "--speed-modifier", "--conf"):
+        assert flag in text, flag
+    args = parser.parse_args(["--interactive", "--policy", "fuzzy", "--part-age", "45"])
+    assert (args.interactive, args.policy, args.part_age) == (True, "fuzzy", "45")
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--policy", "pid"])
+    assert set(POLICY_NAMES) <= set(parser._option_string_actions["--policy"].choices)
 
 
 def test_seed_keys_and_defaults() -> None:
@@ -55,30 +102,42 @@ def test_seed_style_file_and_ros_params_file(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     "values,match",
     [
-        ({"part_age": 0}, r"part_age must be in \(0, 120\]"),
-        ({"part_age": -3}, r"part_age must be in \(0, 120\]"),
-        ({"part_age": 121}, r"part_age must be in \(0, 120\]"),
+        ({"part_age": 0}, "part_age: expected greater than 0"),
+        ({"part_age": -3}, "part_age: expected greater than 0"),
+        ({"part_age": 121}, "part_age: expected less than or equal to 120"),
         ({"zone_low": 0.7, "zone_high": 0.4}, "zone bounds out of order"),
         ({"zone_low": 0.5, "zone_high": 0.5}, "zone bounds out of order"),
-        ({"policy": "pid"}, "unknown policy 'pid'; choose one of threshold, fuzzy, static"),
-        ({"speed_modifier": [], "audio_suffix": []}, "empty speed ladder"),
+        ({"zone_high": 1.2}, "zone_high: expected less than or equal to 1"),
+        ({"policy": "pid"}, "policy: expected 'threshold', 'fuzzy'"),
+        ({"speed_modifier": [], "audio_suffix": []}, "speed_modifier: List should have at least 1 item"),
         ({"speed_modifier": [1.0, 1.1]}, "one music tempo per gesture speed"),
         ({"speed_idx": 6}, "speed_idx 6 is outside the ladder"),
+        ({"speed_idx": -1}, "speed_idx: expected greater than or equal to 0"),
         ({"speed_modifier": [1.0, 0.9, 1.1, 1.2, 1.3, 1.4]}, "increase"),
-        ({"rule_period": 0}, "rule_period must be > 0"),
-        ({"resting_default": 300}, "resting_default"),
-        ({"hr_valid_min": 200, "hr_valid_max": 100}, "hr_valid_min"),
-        ({"part_agee": 30}, r"unknown key\(s\) \['part_agee'\]"),
-        ({"part_age": "old"}, "part_age must be float"),
-        ({"calib_skip": "yes"}, "calib_skip must be bool"),
-        ({"speech_motivation": []}, "speech_motivation must list at least one entry"),
+        ({"speed_modifier": [0.05, 0.9, 1.1, 1.2, 1.3, 1.4]}, r"gesture speeds in \[0.1, 4\]"),
+        ({"speed_modifier": ["fast", 0.9, 1.1, 1.2, 1.3, 1.4]}, "speed_modifier.0: expected a valid number"),
+        ({"gesture_relaxing_speed": 0}, "gesture_relaxing_speed: expected greater than or equal to 0.1"),
+        ({"rule_period": 0}, "rule_period: expected greater than 0"),
+        ({"resting_default": 300}, "resting_default: expected less than or equal to 150"),
+        ({"hr_valid_min": 200, "hr_valid_max": 100}, "hr_valid_min < hr_valid_max"),
+        ({"buffer": 5}, r"buffer \(5\) must hold at least min_valid_samples \(10\)"),
+        ({"part_agee": 30}, r"unknown option\(s\) part_agee"),
+        ({"part_age": "old"}, "part_age: expected a valid number"),
+        ({"part_age": True}, "part_age: expected a number, got True"),
+        ({"calib_skip": "maybe"}, "calib_skip: expected a valid boolean"),
+        ({"speech_motivation": []}, "speech_motivation: List should have at least 1 item"),
+        ({"speech_faster": ["Go!", " "]}, "speech_faster: every entry must be a non-empty text"),
         ({"audio_path": "music.wav"}, "audio_path must contain"),
-        ({"adapt_warmup_max_speedups": -5}, "adapt_warmup_max_speedups"),
+        ({"audio_exercise_base": "exercise"}, "audio_exercise_base must contain"),
+        ({"adapt_warmup_max_speedups": -5}, "adapt_warmup_max_speedups: expected greater than or equal"),
+        ({"max_invalid_fraction": 1.5}, "max_invalid_fraction: expected less than or equal to 1"),
     ],
 )
 def test_invalid_configuration(values: dict, match: str) -> None:
-    with pytest.raises(ConfigError, match=match):
-        config_from_mapping(values, "test.yaml")
+    with pytest.raises(ConfigError, match=match) as info:
+        CoachConfig.from_mapping(values, "test.yaml")
+    message = str(info.value)
+    assert message.startswith("test.yaml: ") and "\n" not in message
 
 
 def test_config_file_errors(tmp_path: Path) -> None:
@@ -138,3 +197,33 @@ def test_coach_rejects_routines_it_cannot_run() -> None:
     with pytest.raises(CoachError, match="speech_zone"):
         ExerciseCoach(cfg.replace(speech_zone="HR {hr_rset}"), lambda: 0.0, lambda line: None,
                       lambda e: None, parse_routine(base))
+
+
+# --- simulated_participant ----------------------------------------------------------------------
+def test_participant_options_cover_the_model_with_its_defaults() -> None:
+    cfg = ParticipantNodeConfig()
+    model = {f.name for f in dataclasses.fields(ParticipantParams)}
+    assert model <= set(ParticipantNodeConfig.model_fields), "a model parameter is not an option"
+    assert cfg.params == ParticipantParams()
+    assert cfg.command_topic == topics.QT_COMMANDS and cfg.state_topic == topics.PARTICIPANT_STATE
+    assert cfg.lsl_name("HR") == "PolarH10/SIM0001/HR"
+    assert cfg.replace(name_prefix="lab1/", device_id="X").lsl_name("ECG") == "lab1/PolarH10/X/ECG"
+    assert ParticipantNodeConfig.from_mapping({"age": "45", "female": "true"}).params.age == 45.0
+
+
+@pytest.mark.parametrize(
+    "values,match",
+    [
+        ({"age": "abc"}, "age: expected a valid number"),
+        ({"age": 0}, "age: expected greater than 0"),
+        ({"hr_rest": 190}, "invalid participant: need 30 <= hr_rest < hr_max_true"),
+        ({"vo2max": 3.0}, "vo2max: expected greater than 3.5"),
+        ({"tempo_compliance": 2}, "tempo_compliance: expected less than or equal to 1"),
+        ({"update_period": 0}, "update_period: expected greater than 0"),
+        ({"device_id": ""}, "device_id: String should have at least 1 character"),
+        ({"seed": 1.5}, "seed: expected a valid integer"),
+    ],
+)
+def test_invalid_participant_options(values: dict, match: str) -> None:
+    with pytest.raises(ConfigError, match=match):
+        ParticipantNodeConfig.from_mapping(values, PARTICIPANT_NODE)

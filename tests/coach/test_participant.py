@@ -170,7 +170,9 @@ def test_strap_artefacts_at_the_configured_rate() -> None:
     noisy = simulate(ParticipantParams(artefact_rate=0.05), [(0, Activity("rest"))], 600, seed=5)
     rr = np.concatenate([o.rr_s for o in noisy])
     odd = np.mean((rr > 1.5 * np.median(rr)) | (rr < 0.6 * np.median(rr)))
-    assert 0.02 < odd < 0.08
+    # Half the artefacts are extra beats (two short reports), half missed ones (one long):
+    # about 0.075 of the ~700 reports, whose sampling SD is about 0.01.
+    assert 0.045 < odd < 0.105
 
 
 def test_robot_commands_set_the_activity() -> None:

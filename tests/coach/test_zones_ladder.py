@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hri_physio_coach.ladder import SpeedLadder, tempo_of_suffix
+from hri_physio_coach.ladder import SpeedLadder
+from hri_physio_coach.media_names import TEMPO_RANGE, base_name, tempo_from_name
+from hri_physio_coach.participant.perception import tempo_from_audio
 from hri_physio_coach.policies import FuzzyPolicy
 from hri_physio_coach.zones import HeartRateZone, fuzzy_probability, tanaka_hr_max
 
@@ -112,7 +114,47 @@ def test_ladder_rejects_bad_definitions(speeds: list[float], suffixes: list[str]
         SpeedLadder(speeds, suffixes, start)
 
 
-def test_tempo_of_suffix() -> None:
-    assert tempo_of_suffix("125") == 125.0
-    assert tempo_of_suffix("fast_130bpm") == 130.0
-    assert tempo_of_suffix("x") is None
+@pytest.mark.parametrize(
+    "name,tempo",
+    [
+        ("125", 125.0),  # a ladder suffix
+        ("exercise_125", 125.0),  # audio_exercise_base with the suffix
+        ("./audio/exercise_125.wav", 125.0),  # the file the coach asks for
+        ("/media/music_130.wav", 130.0),
+        ("C:\\music\\fast_140.mp3", 140.0),
+        ("beat:125", 125.0),
+        ("125bpm.wav", 125.0),
+        ("fast_130bpm", 130.0),
+        ("track2_bpm110.ogg", 110.0),  # tagged: the tag wins over the track number
+        ("120_BPM_remix_v2.flac", 120.0),
+        ("song2_125.wav", 125.0),  # 2 is not a tempo
+        ("2024_mix_128.wav", 128.0),  # the year is not a tempo either
+        ("exercise_127.5", 127.5),  # a decimal tempo, not an extension
+        ("ladder_110_to_135.wav", 135.0),  # the last number: where the suffix goes
+        ("relaxing", None),
+        ("./audio/relaxing.wav", None),
+        ("default", None),
+        ("calm_12.wav", None),  # out of the tempo range
+        ("", None),
+    ],
+)
+def test_tempo_from_name(name: str, tempo: float | None) -> None:
+    assert tempo_from_name(name) == tempo
+    assert tempo_from_audio(name) == tempo  # the participant reads names by the same rule
+
+
+def test_tempo_range_and_base_name() -> None:
+    low, high = TEMPO_RANGE
+    assert tempo_from_name(f"x_{low:g}") == low and tempo_from_name(f"x_{high:g}") == high
+    assert tempo_from_name(f"x_{high + 1:g}") is None
+    assert base_name("./audio/exercise_125.wav") == "exercise_125"
+    assert base_name("exercise_127.5") == "exercise_127.5"
+
+
+def test_ladder_tempo_follows_the_audio_name_rule() -> None:
+    ladder = SpeedLadder([0.9, 1.0, 1.1], ["slow", "beat:120", "140bpm"], 0)
+    assert ladder.tempo is None
+    ladder.step(1)
+    assert ladder.tempo == 120.0
+    ladder.step(1)
+    assert ladder.state()["tempo"] == 140.0

@@ -3,7 +3,8 @@
 There is no ``ros2 launch`` in the pip-wheel ROS 2 used here, so systems are
 started by this launcher (on a full ROS 2 install the same nodes also run with
 ``ros2 run``). Stopping sends SIGINT, then SIGTERM, then SIGKILL, each after a
-grace period, so nodes can flush their logs and bags.
+grace period, so nodes can flush their logs and bags. Each process's whole output can go
+to a log file of its own (``log_path``), whatever is echoed to the console.
 """
 
 from __future__ import annotations
@@ -16,11 +17,12 @@ import signal
 import subprocess
 import sys
 import threading
-import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TextIO
+
+from hri_physio_bridge.waiting import wait_until
 
 
 def find_executable(name: str) -> str:
@@ -57,10 +59,21 @@ class ManagedProcess:
     proc: subprocess.Popen
     reader: threading.Thread
     lines: list[str] = field(default_factory=list)
+    log_path: Path | None = None
 
     @property
     def returncode(self) -> int | None:
         return self.proc.poll()
+
+    def error_line(self) -> str:
+        """What the process said when it failed: its ``<prog>: error: ...`` line (else its last
+        error-level log line, else its last line)."""
+        lines = [line.strip() for line in self.lines if line.strip()]
+        for marker in (": error:", "[ERROR]"):
+            found = [line for line in lines if marker in line]
+            if found:
+                return found[-1]
+        return lines[-1] if lines else f"no output (exit status {self.returncode})"
 
 
 class ProcessGroup:
@@ -75,40 +88,61 @@ class ProcessGroup:
         self._lock = threading.Lock()
 
     def start(self, name: str, script: str, args: Sequence[str] = (), env: dict[str, str] | None = None,
-              echo: bool = True) -> ManagedProcess:
+              echo: bool = True, log_path: Path | None = None) -> ManagedProcess:
+        """Start ``script`` as ``name``; its output (stdout and stderr) is kept, echoed if ``echo``,
+        passed to ``on_line`` and written whole to ``log_path`` (created or truncated) if given."""
         argv = [find_executable(script), *args]
-        proc = subprocess.Popen(
-            argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-            env=env if env is not None else dict(os.environ), text=True, bufsize=1,
-            start_new_session=True,  # our Ctrl-C is forwarded by stop(), not delivered twice
-            preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None,
-        )
-        managed = ManagedProcess(name, argv, proc, threading.Thread())
-        managed.reader = threading.Thread(target=self._pump, args=(managed, echo), daemon=True)
+        log = open(log_path, "w", encoding="utf-8") if log_path is not None else None  # noqa: SIM115
+        try:
+            proc = self._popen(argv, env)
+        except BaseException:
+            if log is not None:
+                log.close()
+            raise
+        managed = ManagedProcess(name, argv, proc, threading.Thread(), log_path=log_path)
+        managed.reader = threading.Thread(target=self._pump, args=(managed, echo, log), daemon=True)
         managed.reader.start()
         self.procs.append(managed)
         return managed
 
-    def _pump(self, managed: ManagedProcess, echo: bool) -> None:
-        assert managed.proc.stdout is not None
-        for raw in managed.proc.stdout:
-            line = raw.rstrip("\n")
-            managed.lines.append(line)
-            del managed.lines[: -self.keep_lines]
-            if self.on_line is not None:
-                self.on_line(managed.name, line)
-            if echo:
-                with self._lock:
-                    print(f"[{managed.name}] {line}", file=self.out, flush=True)
+    @staticmethod
+    def _popen(argv: list[str], env: dict[str, str] | None) -> subprocess.Popen:
+        return subprocess.Popen(
+            argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+            env=env if env is not None else dict(os.environ), text=True, errors="replace", bufsize=1,
+            start_new_session=True,  # our Ctrl-C is forwarded by stop(), not delivered twice
+            preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None,
+        )
 
-    def wait_any_exit(self, timeout: float | None = None) -> ManagedProcess | None:
-        deadline = None if timeout is None else time.monotonic() + timeout
-        while deadline is None or time.monotonic() < deadline:
-            for p in self.procs:
-                if p.returncode is not None:
-                    return p
-            time.sleep(0.05)
-        return None
+    def _pump(self, managed: ManagedProcess, echo: bool, log: TextIO | None) -> None:
+        assert managed.proc.stdout is not None
+        try:
+            for raw in managed.proc.stdout:
+                line = raw.rstrip("\n")
+                if log is not None:
+                    log.write(raw if raw.endswith("\n") else raw + "\n")
+                    log.flush()  # a crash of the launcher still leaves the log on disk
+                managed.lines.append(line)
+                del managed.lines[: -self.keep_lines]
+                if self.on_line is not None:
+                    self.on_line(managed.name, line)
+                if echo:
+                    with self._lock:
+                        print(f"[{managed.name}] {line}", file=self.out, flush=True)
+        finally:
+            if log is not None:
+                log.close()
+
+    def wait_any_exit(self, timeout: float | None = None,
+                      stop: threading.Event | None = None) -> ManagedProcess | None:
+        """The first process found to have exited, or None after ``timeout`` (or a stop)."""
+        exited: list[ManagedProcess] = []
+
+        def any_exited() -> bool:
+            exited[:] = [p for p in self.procs if p.returncode is not None]
+            return bool(exited)
+
+        return exited[0] if wait_until(any_exited, timeout, stop=stop) else None
 
     def stop(self, grace: float = 10.0) -> dict[str, int]:
         """Stop every process (reverse start order); returns exit codes by name."""

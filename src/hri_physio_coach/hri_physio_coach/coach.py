@@ -4,8 +4,9 @@ The routine file says what happens when (phases, activities, media, speech); thi
 gives the scenario its exercise-specific parts: the calibration of HR_rest and the zone,
 the HR buffer, the rule update (an :class:`~hri_physio_coach.policies.Adapter` on the speed
 ladder, gated on signal quality), the random behaviours, the calibration reminders, and
-the robot commands of the text protocol. Every decision becomes a JSON-able event with
-its inputs and outputs and the participant id (never the name).
+the robot commands (typed :mod:`qt_controller.commands`, written with ``to_line()``). Every
+decision becomes a JSON-able event with its inputs and outputs and the participant id (never
+the name); a rule update that did not adapt says why with a :mod:`~hri_physio_coach.gates` code.
 """
 
 from __future__ import annotations
@@ -18,35 +19,56 @@ from decimal import ROUND_HALF_UP, Decimal
 from pathlib import Path
 from typing import Any
 
+from hri_physio_coach import gates
+from hri_physio_coach.activity_choice import ActivityChoice
 from hri_physio_coach.config import CoachConfig
 from hri_physio_coach.engine import FINISHED, STOPPED, ActionContext, Event, Hook, Listener, ScenarioEngine
 from hri_physio_coach.hr_input import HeartRateMonitor
 from hri_physio_coach.ladder import SpeedLadder
+from hri_physio_coach.media_names import tempo_from_name
 from hri_physio_coach.paths import default_routine_file
 from hri_physio_coach.policies import (
     AT_LIMIT,
+    CHANGE_ACTIVITY,
     ENCOURAGE,
     GATED,
     HOLD,
+    OUT_OF_REACH,
     SCHEDULED_SLOW_DOWN,
     SLOW_DOWN,
     SPEED_UP,
     Adapter,
+    Controls,
     Decision,
     RuleInput,
     make_policy,
 )
 from hri_physio_coach.routine import Action, Activity, Phase, Routine, load_routine
 from hri_physio_coach.zones import HeartRateZone, tanaka_hr_max
+from qt_controller.commands import (
+    Command,
+    ParseError,
+    SetAudio,
+    SetEmotion,
+    SetGesture,
+    SetSpeech,
+    SetVideo,
+    SetVolume,
+)
 
 CALIBRATION = "calibration"
 RULE_UPDATE, BEHAVIOUR, REMINDER = "rule_update", "behaviour", "reminder"
 BEHAVIOURS = ("motivation", "emotion", "hr_report")
 
-_STRING_VARS = ("name", "video", "gesture", "label", "activity", "phase", "splash", "music",
+_STRING_VARS = ("name", "video", "gesture", "label", "routine_label", "activity", "phase", "splash", "music",
                 "relaxing_audio", "relaxing_video", "relaxing_gesture", "minutes_word")
 _NUMBER_VARS = ("speed", "tempo", "relaxing_speed", "calib_minutes", "minutes_left", "hr_rest", "hr_max",
                 "zone_low", "zone_high", "zone_target", "hr")
+
+
+def _gesture(name: str, speed: float) -> SetGesture:
+    """A gesture at ``speed`` to 0.01, as the coach has always sent it (``set gesture marching 0.95``)."""
+    return SetGesture(name, round(speed, 2))
 
 
 class CoachError(ValueError):
@@ -99,6 +121,14 @@ class ExerciseCoach(Listener):
         self._calibrated_in_phase = False
         self._gesture: tuple[str, bool] | None = None  # (name, follows the ladder)
         self._audio_follows_ladder = False
+        # Policies that pick activities: what runs in each slot, where the HR buffer starts, notices said.
+        self.choice = ActivityChoice(routine)
+        self._routine_costs = tuple(
+            (p.kind, tuple((a.duration, a.mets) for a in p.activities if a.mets is not None))
+            for p in routine.phases)
+        self._tempos = tuple(tempo_from_name(s) for s in self.ladder.suffixes)
+        self._buffer_since = 0.0
+        self._noticed: set[str] = set()
         self._calls: dict[str, Callable[[ActionContext], None]] = {"calibrate": self._call_calibrate}
         hooks = {
             RULE_UPDATE: Hook(RULE_UPDATE, config.rule_period, self._rule_update, priority=10),
@@ -159,6 +189,8 @@ class ExerciseCoach(Listener):
             **self.engine.state_dict(), **{f"ladder_{k}": v for k, v in self.ladder.state().items()},
             "zone": self.zone.as_dict() if self.zone else None,
             "adaptation": "paused" if self.monitor.lost else "active", "last_hr": self.monitor.last_hr,
+            "performing": self.choice.current.name if self.choice.current else None,
+            "activity_level": self.adapter.level,
         }
 
     # --- events and commands -----------------------------------------------------------------
@@ -169,8 +201,13 @@ class ExerciseCoach(Listener):
         name = self.cfg.part_name.strip()
         return text.replace(name, "<name>") if name else text
 
-    def command(self, line: str, why: str) -> bool:
-        """Send one robot command; a failure to send is logged and does not stop the session."""
+    def command(self, command: Command, why: str) -> bool:
+        """Send one robot command; a failure to build or send it is logged and the session goes on."""
+        try:
+            line = command.to_line()
+        except ParseError as exc:
+            self._build_failed(repr(command), str(exc), why)
+            return False
         self._emit({"event": "command", "command": self._redact(line), "why": why})
         try:
             self._send(line)
@@ -180,8 +217,13 @@ class ExerciseCoach(Listener):
             return False
         return True
 
+    def _build_failed(self, what: str, message: str, why: str) -> None:
+        """A command the routine or configuration asked for that the protocol cannot carry."""
+        self._emit({"event": "command_failed", "command": self._redact(what),
+                    "message": self._redact(message), "source": "build", "why": why})
+
     def say(self, text: str, why: str) -> None:
-        self.command(f"set speech {text}", why)
+        self.command(SetSpeech(text.strip()), why)
 
     # --- template variables ------------------------------------------------------------------
     def _variables(self, ctx: ActionContext | None = None, **extra: Any) -> dict[str, Any]:
@@ -208,6 +250,10 @@ class ExerciseCoach(Listener):
                           zone_high=_spoken(self.zone.high), zone_target=_spoken(self.zone.target))
         if activity is not None:
             values.update({k: v for k, v in activity.attrs.items() if isinstance(v, str | int | float)})
+            running = self.choice.running if activity is self.engine.activity else None
+            if running is not None:  # another activity runs in this slot: its gesture, video and label
+                values.update({k: v for k, v in running.attrs.items() if isinstance(v, str | int | float)})
+                values.update(label=running.label, routine_label=activity.label)
         values.update(extra)
         return values
 
@@ -215,7 +261,10 @@ class ExerciseCoach(Listener):
         """Fail at start-up, not mid-session, on placeholders, calls or hooks the coach lacks."""
         dummy: dict[str, Any] = {k: "x" for k in _STRING_VARS} | {k: 1.0 for k in _NUMBER_VARS}
         templates = [("speech_hr_report", self.cfg.speech_hr_report), ("speech_zone", self.cfg.speech_zone),
-                     ("speech_calib_reminder", self.cfg.speech_calib_reminder)]
+                     ("speech_calib_reminder", self.cfg.speech_calib_reminder),
+                     ("speech_out_of_reach_below", self.cfg.speech_out_of_reach_below),
+                     ("speech_out_of_reach_above", self.cfg.speech_out_of_reach_above),
+                     *(("speech_activity_switch", text) for text in self.cfg.speech_activity_switch)]
         for phase in routine.phases:
             actions = [*phase.on_enter, *phase.on_exit, *phase.activity_actions]
             for activity in phase.activities:
@@ -258,39 +307,53 @@ class ExerciseCoach(Listener):
         variables = self._variables(ctx)
         value = action.value.format_map(variables)
         why = f"{ctx.phase.name if ctx.phase else 'routine'}/{ctx.activity.name if ctx.activity else '-'}"
+        if action.kind == "say" and self._speaks_for_replaced_slot(action, ctx):
+            value = self.rng.choice(self.cfg.speech_activity_switch).format_map(variables)
         if action.kind == "say":
             self.say(value, why)
         elif action.kind == "emotion":
-            self.command(f"set emotion {value}", why)
+            self.command(SetEmotion(value), why)
         elif action.kind == "volume":
-            self.command(f"set volume {value}", why)
+            try:
+                percent = int(value)
+            except ValueError:
+                self._build_failed(f"volume {value!r}", "volume must be a whole number", why)
+                return
+            self.command(SetVolume(percent), why)
         elif action.kind == "video":
-            self.command(f"set video {self.cfg.video_path.format(value)}", why)
+            self.command(SetVideo(self.cfg.video_path.format(value)), why)
         elif action.kind == "audio":
             self._audio_follows_ladder = "{music}" in action.value
-            self.command(f"set audio {self.cfg.audio_path.format(value)}", why)
+            self.command(SetAudio(self.cfg.audio_path.format(value)), why)
         elif action.kind == "gesture":
             raw_speed = action.params.get("speed", "current")
             follows = raw_speed == "current"
-            speed = self.ladder.speed if follows else float(str(raw_speed).format_map(variables))
+            try:
+                speed = self.ladder.speed if follows else float(str(raw_speed).format_map(variables))
+            except ValueError:
+                self._build_failed(f"gesture {value!r} at speed {raw_speed!r}",
+                                   "gesture speed must be a number", why)
+                return
             self._gesture = (value, follows)
-            self.command(f"set gesture {value} {speed:.2f}", why)
+            self.command(_gesture(value, speed), why)
 
-    def _resend_pace(self, why: str) -> None:
+    def _resend_pace(self, why: str, gesture: bool = True) -> None:
         """After a ladder change: the gesture at the new speed, the music at the new tempo."""
-        if self._gesture is not None and self._gesture[1]:
-            self.command(f"set gesture {self._gesture[0]} {self.ladder.speed:.2f}", why)
+        if gesture and self._gesture is not None and self._gesture[1]:
+            self.command(_gesture(self._gesture[0], self.ladder.speed), why)
         if self._audio_follows_ladder:
             music = self.cfg.audio_exercise_base.format(self.ladder.suffix)
-            self.command(f"set audio {self.cfg.audio_path.format(music)}", why)
+            self.command(SetAudio(self.cfg.audio_path.format(music)), why)
 
     # --- listener ----------------------------------------------------------------------------
     def on_phase_start(self, phase: Phase, t: float) -> None:
         if phase.kind == CALIBRATION:
             self._calibrated_in_phase = False
             self.monitor.start_calibration()
-        elif self.zone is None:
+            return
+        if self.zone is None:
             self._set_zone(self.cfg.resting_default, "default", "calibration skipped", 0, t)
+        self._plan_phase(phase, t)
 
     def on_phase_end(self, phase: Phase, t: float) -> None:
         if phase.kind == CALIBRATION and not self._calibrated_in_phase:
@@ -298,8 +361,15 @@ class ExerciseCoach(Listener):
 
     def on_activity_start(self, phase: Phase, activity: Activity, t: float) -> None:
         self.monitor.clear()
+        self._buffer_since = t
+        running = self.choice.slot_started(phase, activity, self.adapter.level)
+        if running is not None:
+            self._emit({"event": "activity_choice", "phase": phase.name, "slot": activity.name,
+                        "activity": running.name, "mets": running.mets, "level": self.adapter.level,
+                        "reason": "the policy holds another activity cost than the slot's"})
         if phase.kind != CALIBRATION:
             self._gesture = None  # the activity's own actions set its gesture
+            self.adapter.observe(t, self._controls(t))
 
     def on_end(self, t: float) -> None:
         self._emit({"event": "summary", "decisions": len(self.decisions),
@@ -358,7 +428,7 @@ class ExerciseCoach(Listener):
             emotion = self.rng.choice(self.cfg.emotion_motivation)
             event["emotion"] = emotion
             self._emit(event)
-            self.command(f"set emotion {emotion}", "behaviour: emotion")
+            self.command(SetEmotion(emotion), "behaviour: emotion")
         else:
             text = self.cfg.speech_hr_report.format_map(self._variables(hr=recent))
             event.update(text=text, hr=recent, window=self.cfg.hr_report_window)
@@ -374,20 +444,27 @@ class ExerciseCoach(Listener):
                   "activity": activity.name if activity else None,
                   "zone": [self.zone.low, self.zone.high] if self.zone else None,
                   "ladder_index": self.ladder.index}
-        reason = "no heart-rate zone yet" if self.zone is None else self.monitor.gate(stats, t)
-        if reason is not None or self.zone is None or stats.mean is None or phase is None:
-            decision = self.adapter.gated(t, reason or "no heart rate", stats.mean)
+        gate = (gates.Gate(gates.NO_ZONE, "no heart-rate zone yet") if self.zone is None
+                else self.monitor.gate(stats, t))
+        if gate is not None:
+            decision = self.adapter.gated(t, gate.reason, stats.mean, gate=gate.code)
         else:
+            assert self.zone is not None and stats.mean is not None and phase is not None  # gate and engine
             decision = self.adapter.update(RuleInput(
                 t=t, hr=stats.mean, zone=self.zone, phase=phase.kind,
                 phase_start=self.engine.phase_start, phase_end=self.engine.phase_end,
+                controls=self._controls(self._buffer_since),
             ))
+        self._buffer_since = t
         self.decisions.append(decision)
         self._emit({"event": RULE_UPDATE, "inputs": inputs, "decision": decision.as_dict(),
                     "ladder": self.ladder.state()})
-        self._speak_decision(decision)
+        switched = self._apply_level(decision)
+        if not switched:
+            self._speak_decision(decision)
         if decision.changed:
-            self._resend_pace(f"rule update: {decision.action}")
+            self._resend_pace(f"rule update: {decision.action}", gesture=not switched)
+            self.adapter.observe(t, self._controls(t))
 
     def _speak_decision(self, decision: Decision) -> None:
         cfg, action = self.cfg, decision.action
@@ -399,11 +476,92 @@ class ExerciseCoach(Listener):
             lines = cfg.speech_slower
         elif action == SCHEDULED_SLOW_DOWN:
             lines = cfg.speech_cooldown
-        elif action in (ENCOURAGE, HOLD, AT_LIMIT):
+        elif action in (ENCOURAGE, HOLD, AT_LIMIT) or (action == CHANGE_ACTIVITY and decision.delta == 0):
             lines = cfg.speech_motivation
+        elif action == CHANGE_ACTIVITY:
+            lines = cfg.speech_faster if decision.delta > 0 else cfg.speech_slower
+        elif action == OUT_OF_REACH:
+            self._say_out_of_reach(decision)
+            return
         else:
             raise AssertionError(f"unhandled decision action {action}")
         self.say(self.rng.choice(lines), f"rule update: {action}")
+
+    # --- policies that pick activities ---------------------------------------------------------
+    def _controls(self, window_start: float) -> Controls:
+        """What is performed now and what the coach may change, for the policy."""
+        doing = self.choice.current if self.choice.current is not None else self.engine.activity
+        return Controls(
+            activity=doing.name if doing else None, mets=doing.mets if doing else None,
+            chosen=self.adapter.level,
+            levels=self.choice.levels(self.engine.phase) if self.adapter.chooses_activity else (),
+            speeds=self.ladder.speeds, tempos=self._tempos, index=self.ladder.index,
+            window_start=window_start,
+            routine_costs=self._routine_costs if self.adapter.chooses_activity else (),
+        )
+
+    def _plan_phase(self, phase: Phase, t: float) -> None:
+        """A policy that plans phases sets this one up before its first activity's actions run."""
+        if self.zone is None:
+            return
+        hr = self.monitor.last_hr if self.monitor.last_hr is not None else self.zone.target
+        decision = self.adapter.plan(RuleInput(
+            t=t, hr=hr, zone=self.zone, phase=phase.kind, phase_start=t, phase_end=t + phase.duration,
+            controls=self._controls(self._buffer_since)))
+        if decision is None:
+            return
+        self.decisions.append(decision)
+        self._emit({"event": "plan", "phase": phase.name, "decision": decision.as_dict(),
+                    "ladder": self.ladder.state()})
+        self._speak_decision(decision)  # the first activity's own actions carry the new pace
+
+    def _speaks_for_replaced_slot(self, action: Action, ctx: ActionContext) -> bool:
+        """A slot's own lines ("Back to marching") are not said while another activity runs in it."""
+        slot = ctx.activity
+        return (self.choice.running is not None and slot is not None and slot is self.engine.activity
+                and any(action is a for a in slot.on_enter))
+
+    def _apply_level(self, decision: Decision) -> bool:
+        """The policy now holds another activity cost: switch the running activity if needed."""
+        phase, slot = self.engine.phase, self.engine.activity
+        if decision.level_after == decision.level_before or phase is None or slot is None:
+            return False
+        to = self.choice.switch(phase, slot, self.adapter.level)
+        if to is None:
+            return False
+        why = f"rule update: {decision.action}"
+        self._emit({"event": "activity_choice", "phase": phase.name, "slot": slot.name, "activity": to.name,
+                    "mets": to.mets, "level": self.adapter.level, "reason": decision.reason})
+        variables = self._variables(ActionContext(self.engine.now, phase, slot))
+        video, gesture = to.attrs.get("video"), to.attrs.get("gesture")
+        if video:
+            self.command(SetVideo(self.cfg.video_path.format(video)), why)
+            slot_start = self.engine.activity_start
+
+            def splash() -> None:
+                if self.engine.activity_start == slot_start:  # the same slot is still on
+                    self.command(SetVideo(self.cfg.video_path.format(self.cfg.video_default)), why)
+
+            self.engine.schedule(self.engine.now + self.cfg.video_time, splash, "video:splash")
+        self.say(self.rng.choice(self.cfg.speech_activity_switch).format_map(variables), why)
+        if gesture:
+            self._gesture = (str(gesture), True)
+            self.command(_gesture(str(gesture), self.ladder.speed), why)
+        return True
+
+    def _say_out_of_reach(self, decision: Decision) -> None:
+        """Once per kind: the zone cannot be reached with the controls at hand (event + a line)."""
+        notice = decision.notice or OUT_OF_REACH
+        if notice in self._noticed:
+            return
+        self._noticed.add(notice)
+        below = notice.endswith("below")
+        text = self.cfg.speech_out_of_reach_below if below else self.cfg.speech_out_of_reach_above
+        self._emit({"event": "zone_out_of_reach", "notice": notice,
+                    "direction": "below" if below else "above", "hr": decision.hr,
+                    "ladder_index": self.ladder.index, "activity_level": self.adapter.level,
+                    "reason": decision.reason, "text": text})
+        self.say(text, "zone out of reach")
 
     def _check_hr_timeout(self, now: float) -> None:
         start = self.engine.start_time if self.engine.start_time is not None else now

@@ -1,116 +1,184 @@
-"""The coach's configuration: the seed's coach.yaml keys plus the new options, validated.
+"""The coach's configuration: the seed's coach.yaml keys plus our own, each declared once.
 
-Every key has a default that runs with no hardware; a YAML file (flat, as the seed's, or a
-ROS params file section) overrides them. Unknown keys and wrong types are errors, so a
-typo cannot silently fall back to a default. :func:`participant_id` turns name and age into
-the id every log and event carries (never the name).
+:class:`CoachConfig` is a :class:`~hri_physio_bridge.config.NodeConfig`: every key has its type,
+a default that runs with no hardware, its help text, unit and bounds on the field, and the
+rules between keys (zone order, ladder, templates) in one validator. A YAML file (flat, as the
+seed's, or a ROS params file section) overrides the defaults; unknown keys and wrong types are
+:class:`~hri_physio_bridge.config.ConfigError` (one line naming the key), so a typo cannot
+silently fall back to a default. :class:`CoachNodeConfig` adds the node's topics and timing.
+:func:`participant_id` turns name and age into the id every log and event carries (never the name).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
+import itertools
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar, Literal
 
-import yaml
+from pydantic import model_validator
 
+from hri_physio_bridge import topics
+from hri_physio_bridge.config import ConfigError, NodeConfig, option
 from hri_physio_coach.policies import POLICY_NAMES, AdapterOptions
+from qt_controller.commands import GESTURE_SPEED_RANGE
+
+__all__ = ["COACH_NODE", "CoachConfig", "CoachNodeConfig", "ConfigError", "load_config", "participant_id"]
+
+#: The coach node's name: the section of a ROS params file that holds its options.
+COACH_NODE = "qt_physio_coach"
+PolicyName = Literal[POLICY_NAMES]  # type: ignore[valid-type]
+_SPEECH_LISTS = ("speech_relaxation", "speech_motivation", "speech_faster", "speech_slower",
+                 "speech_cooldown", "emotion_motivation", "speech_activity_switch")
+_NAME_TEMPLATES = ("audio_path", "video_path", "audio_exercise_base")
 
 
-class ConfigError(ValueError):
-    """Invalid coach configuration; the message is one line that says what to fix."""
+class CoachConfig(NodeConfig):
+    """The exercise session's options (``config/coach.yaml`` lists every one with its default)."""
 
+    SEED_KEYS: ClassVar[tuple[str, ...]] = (
+        "part_name", "part_age", "calib_time", "calib_skip", "resting_default", "speed_idx",
+        "speed_modifier", "audio_suffix", "audio_path", "video_path", "audio_default", "audio_relaxing",
+        "audio_exercise_base", "video_default", "video_relaxing", "video_time", "gesture_relaxing",
+        "gesture_relaxing_speed", "speech_relaxation", "speech_motivation", "speech_faster",
+        "speech_slower", "speech_cooldown", "speech_hr_report", "speech_calib_reminder", "speech_zone",
+        "emotion_motivation", "buffer",
+    )
 
-def _strings(*items: str) -> list[str]:
-    return list(items)
-
-
-@dataclass(frozen=True)
-class CoachConfig:
-    # --- participant (seed keys) ---
-    part_name: str = "JohnDoe"
-    part_age: float = 28.0
-    participant_salt: str = ""  # optional secret mixed into the participant id hash
-    address_by_name: bool = False  # speak the name (it then travels on /QtController/input)
-    # --- calibration (seed keys calib_time, calib_skip, resting_default) ---
-    calib_time: float = 180.0
-    calib_skip: bool = False
-    resting_default: float = 61.0
-    calib_min_samples: int = 30  # fewer valid HR samples: use resting_default
-    calib_reminder_period: float = 60.0
-    # --- heart-rate zone (fractions of HRR) ---
-    zone_low: float = 0.40
-    zone_high: float = 0.70
-    # --- speed ladder (seed keys) ---
-    speed_modifier: list[float] = field(default_factory=lambda: [0.90, 0.95, 1.00, 1.05, 1.10, 1.15])
-    audio_suffix: list[str] = field(
-        default_factory=lambda: _strings("110", "115", "120", "125", "130", "135"))
-    speed_idx: int = 1
-    # --- media and gestures (seed keys) ---
-    audio_path: str = "./audio/{}.wav"
-    video_path: str = "./video/{}.mp4"
-    audio_default: str = "default"
-    audio_relaxing: str = "relaxing"
-    audio_exercise_base: str = "exercise_{}"
-    video_default: str = "splash"
-    video_relaxing: str = "relaxing"
-    video_time: float = 30.0
-    gesture_relaxing: str = "base"
-    gesture_relaxing_speed: float = 0.5
-    # --- timing of the periodic hooks ---
-    behaviour_period: float = 20.0
-    rule_period: float = 30.0
-    hr_report_window: float = 30.0
-    # --- heart-rate input and signal gating ---
-    hr_timeout: float = 10.0
-    hr_valid_min: float = 30.0
-    hr_valid_max: float = 230.0
-    min_valid_samples: int = 10  # per rule-update buffer
-    max_invalid_fraction: float = 0.5  # more invalid or flagged samples: the signal is flagged
-    buffer: int = 1000  # seed key: HR buffer length (samples)
-    # --- adaptation ---
-    policy: str = "threshold"
-    seed: int = 0
-    adapt_refractory: bool = False
-    adapt_refractory_period: float = 60.0
-    adapt_conditioning_only: bool = False
-    adapt_cooldown_schedule: bool = False
-    adapt_warmup_max_speedups: int = -1  # -1: no cap
-    # --- routine ---
-    routine_file: str = ""  # empty: the packaged exercise routine
-    # --- speech and emotions (seed keys) ---
-    speech_relaxation: list[str] = field(default_factory=lambda: _strings(
+    # --- participant ---------------------------------------------------------------------------
+    part_name: str = option("JohnDoe", "participant name: only its hash (with age and salt) is logged")
+    part_age: float = option(28.0, "participant age, for HR_max = 208 - 0.7 age", unit="years", gt=0, le=120)
+    participant_salt: str = option("", "secret mixed into the participant id hash")
+    address_by_name: bool = option(False, "the robot says the name (it then travels on the robot's "
+                                   "command topic)")
+    # --- calibration ---------------------------------------------------------------------------
+    calib_time: float = option(180.0, "seated calibration of HR_rest", unit="s", gt=0)
+    calib_skip: bool = option(False, "skip the calibration phase and use resting_default")
+    resting_default: float = option(61.0, "HR_rest when calibration is skipped or has too few samples",
+                                    unit="bpm", ge=20, le=150)
+    calib_min_samples: int = option(30, "fewer valid HR samples in calibration: use resting_default",
+                                    unit="samples", ge=1)
+    calib_reminder_period: float = option(60.0, "time between 'breathe / time left' reminders",
+                                          unit="s", gt=0)
+    # --- heart-rate zone -----------------------------------------------------------------------
+    zone_low: float = option(0.40, "lower zone bound as a fraction of the heart-rate reserve (HRR40)",
+                             ge=0, le=1)
+    zone_high: float = option(0.70, "upper zone bound as a fraction of the heart-rate reserve (HRR70)",
+                              ge=0, le=1)
+    # --- speed ladder --------------------------------------------------------------------------
+    speed_modifier: list[float] = option([0.90, 0.95, 1.00, 1.05, 1.10, 1.15],
+                                         "gesture speed of each ladder step, increasing", min_length=1)
+    audio_suffix: list[str] = option(["110", "115", "120", "125", "130", "135"],
+                                     "music tempo suffix of each ladder step (one per gesture speed)",
+                                     min_length=1)
+    speed_idx: int = option(1, "ladder step at the start", ge=0)
+    # --- media and gestures --------------------------------------------------------------------
+    audio_path: str = option("./audio/{}.wav", "audio file of a name ('{}' = the name)")
+    video_path: str = option("./video/{}.mp4", "video file of a name ('{}' = the name)")
+    audio_default: str = option("default", "seed key, loaded but not used by the coach yet")
+    audio_relaxing: str = option("relaxing", "audio of the calibration and the end")
+    audio_exercise_base: str = option("exercise_{}", "exercise music name ('{}' = the ladder's suffix)")
+    video_default: str = option("splash", "the splash screen video")
+    video_relaxing: str = option("relaxing", "video of the calibration")
+    video_time: float = option(30.0, "reference video shown before the splash screen", unit="s", gt=0)
+    gesture_relaxing: str = option("base", "gesture of the calibration")
+    gesture_relaxing_speed: float = option(0.5, "speed of the calibration gesture",
+                                           ge=GESTURE_SPEED_RANGE[0], le=GESTURE_SPEED_RANGE[1])
+    # --- periodic hooks ------------------------------------------------------------------------
+    behaviour_period: float = option(20.0, "time between random behaviours", unit="s", gt=0)
+    rule_period: float = option(30.0, "time between rule updates (a rule update wins over a behaviour "
+                                "due at the same instant)", unit="s", gt=0)
+    hr_report_window: float = option(30.0, "window of the spoken average heart rate", unit="s", gt=0)
+    # --- heart-rate input and signal gating ----------------------------------------------------
+    hr_timeout: float = option(10.0, "time without HR before adaptation pauses (the routine goes on)",
+                               unit="s", gt=0)
+    hr_valid_min: float = option(30.0, "lowest plausible heart rate", unit="bpm", gt=0)
+    hr_valid_max: float = option(230.0, "highest plausible heart rate", unit="bpm", gt=0)
+    min_valid_samples: int = option(10, "valid HR samples a rule update needs", unit="samples", ge=1)
+    max_invalid_fraction: float = option(0.5, "more invalid or flagged samples than this: signal flagged, "
+                                         "no update", ge=0, le=1)
+    buffer: int = option(1000, "HR buffer length", unit="samples", ge=1)
+    # --- adaptation ----------------------------------------------------------------------------
+    policy: PolicyName = option("threshold", "adaptation policy: threshold (Algorithm 1), fuzzy "
+                                "(Algorithm 2), static (control condition), predictive (acts on the "
+                                "predicted steady-state HR, chooses activity and pace)")
+    seed: int = option(0, "seed of the fuzzy policy's draws and of the random behaviours")
+    adapt_refractory: bool = option(False, "no adaptation within adapt_refractory_period of the last one")
+    adapt_refractory_period: float = option(60.0, "the refractory period", unit="s", ge=0)
+    adapt_conditioning_only: bool = option(False, "adapt in the conditioning phase only")
+    adapt_cooldown_schedule: bool = option(False, "the ladder falls linearly to the bottom through the "
+                                           "cool-down")
+    adapt_warmup_max_speedups: int = option(-1, "most speed-ups in the warm-up (-1: no cap)", ge=-1)
+    # --- routine -------------------------------------------------------------------------------
+    routine_file: str = option("", "routine YAML file (empty: the packaged exercise routine)")
+    # --- speech and emotions -------------------------------------------------------------------
+    speech_relaxation: list[str] = option([
         "Just sit back and take big, slow breaths.",
         "Relax your shoulders and breathe in deeply through your nose.",
-    ))
-    speech_motivation: list[str] = field(default_factory=lambda: _strings(
-        "You are doing great, keep it up!",
-        "Nice work, keep going!",
-        "Fantastic effort!",
-    ))
-    speech_faster: list[str] = field(default_factory=lambda: _strings(
-        "Let's pick up the pace!",
-    ))
-    speech_slower: list[str] = field(default_factory=lambda: _strings(
-        "Let's slow down a little, don't over-exert yourself.",
-    ))
-    speech_cooldown: list[str] = field(default_factory=lambda: _strings(
-        "Let's slow the pace down as we cool down.",
-    ))
-    emotion_motivation: list[str] = field(default_factory=lambda: _strings("happy"))
-    speech_hr_report: str = "Your average heart rate over the last 30 seconds was {hr:.0f} beats per minute."
-    speech_calib_reminder: str = (
-        "You're doing great. Don't forget to breathe. Only {minutes_left} {minutes_word} left."
-    )
-    speech_zone: str = (
+    ], "seed key, loaded but not used by the coach yet", min_length=1)
+    speech_motivation: list[str] = option([
+        "You are doing great, keep it up!", "Nice work, keep going!", "Fantastic effort!",
+    ], "encouragements (random behaviour, pace kept)", min_length=1)
+    speech_faster: list[str] = option(["Let's pick up the pace!"], "said on a speed-up", min_length=1)
+    speech_slower: list[str] = option(["Let's slow down a little, don't over-exert yourself."],
+                                      "said on a slow-down", min_length=1)
+    speech_cooldown: list[str] = option(["Let's slow the pace down as we cool down."],
+                                        "said on a scheduled cool-down slow-down", min_length=1)
+    emotion_motivation: list[str] = option(["happy"], "faces of the random behaviour", min_length=1)
+    speech_hr_report: str = option(
+        "Your average heart rate over the last 30 seconds was {hr:.0f} beats per minute.",
+        "the heart-rate report ({hr} = mean of hr_report_window)")
+    speech_calib_reminder: str = option(
+        "You're doing great. Don't forget to breathe. Only {minutes_left} {minutes_word} left.",
+        "the calibration reminder")
+    speech_zone: str = option(
         "My calibrations are complete! Thank you for your patience. I measured your resting heart rate "
         "to be {hr_rest:.1f} beats per minute. I will do my best to keep your heart rate between "
-        "{zone_low:.1f} and {zone_high:.1f} beats per minute."
-    )
+        "{zone_low:.1f} and {zone_high:.1f} beats per minute.",
+        "the zone announcement after calibration")
+    speech_activity_switch: list[str] = option([
+        "Let's switch to {label} now, follow my lead!",
+    ], "said when a policy that picks activities runs {label} in place of the routine's {routine_label}",
+        min_length=1)
+    speech_out_of_reach_below: str = option(
+        "You are working as hard as this routine goes, and that is fine: keep going at this pace.",
+        "said once when heart rate stays below the zone with every control at its limit")
+    speech_out_of_reach_above: str = option(
+        "This is the gentlest pace of the routine: keep going as comfortably as you can.",
+        "said once when heart rate stays above the zone with every control at its lowest")
+
+    @model_validator(mode="after")
+    def _rules_between_keys(self) -> CoachConfig:
+        if not self.zone_low < self.zone_high:
+            raise ValueError(f"zone bounds out of order: need zone_low < zone_high, got {self.zone_low:g}, "
+                             f"{self.zone_high:g}")
+        speeds = self.speed_modifier
+        if len(self.audio_suffix) != len(speeds):
+            raise ValueError(f"speed_modifier has {len(speeds)} steps but audio_suffix has "
+                             f"{len(self.audio_suffix)}: one music tempo per gesture speed")
+        low, high = GESTURE_SPEED_RANGE
+        if any(not (math.isfinite(s) and low <= s <= high) for s in speeds):
+            raise ValueError(f"speed_modifier values must be gesture speeds in [{low:g}, {high:g}], "
+                             f"got {speeds}")
+        if any(b <= a for a, b in itertools.pairwise(speeds)):
+            raise ValueError(f"speed_modifier must increase step by step, got {speeds}")
+        if self.speed_idx >= len(speeds):
+            raise ValueError(f"speed_idx {self.speed_idx} is outside the ladder [0, {len(speeds) - 1}]")
+        if not self.hr_valid_min < self.hr_valid_max:
+            raise ValueError(f"need hr_valid_min < hr_valid_max, got {self.hr_valid_min:g}, "
+                             f"{self.hr_valid_max:g}")
+        if self.buffer < self.min_valid_samples:
+            raise ValueError(f"buffer ({self.buffer}) must hold at least min_valid_samples "
+                             f"({self.min_valid_samples})")
+        for key in _SPEECH_LISTS:
+            if any(not entry.strip() for entry in getattr(self, key)):
+                raise ValueError(f"{key}: every entry must be a non-empty text")
+        for key in _NAME_TEMPLATES:
+            if "{}" not in getattr(self, key):
+                raise ValueError(f"{key} must contain '{{}}' where the name goes, got {getattr(self, key)!r}")
+        return self
 
     # ------------------------------------------------------------------------------------------
     @property
@@ -128,152 +196,33 @@ class CoachConfig:
     def participant(self) -> str:
         return participant_id(self.part_name, self.part_age, self.participant_salt)
 
-    def validate(self) -> CoachConfig:
-        """Check every cross-field rule; raise :class:`ConfigError` on the first violation."""
-        if not (math.isfinite(self.part_age) and 0 < self.part_age <= 120):
-            raise ConfigError(f"part_age must be in (0, 120] years, got {self.part_age:g}")
-        if not 0.0 <= self.zone_low < self.zone_high <= 1.0:
-            raise ConfigError(
-                f"zone bounds out of order: need 0 <= zone_low < zone_high <= 1, got {self.zone_low:g}, "
-                f"{self.zone_high:g}"
-            )
-        if self.policy not in POLICY_NAMES:
-            raise ConfigError(f"unknown policy {self.policy!r}; choose one of {', '.join(POLICY_NAMES)}")
-        if not self.speed_modifier:
-            raise ConfigError("empty speed ladder: speed_modifier needs at least one gesture speed")
-        if len(self.audio_suffix) != len(self.speed_modifier):
-            raise ConfigError(
-                f"speed_modifier has {len(self.speed_modifier)} steps but audio_suffix has "
-                f"{len(self.audio_suffix)}: one music tempo per gesture speed"
-            )
-        if any(not (math.isfinite(s) and s > 0) for s in self.speed_modifier):
-            raise ConfigError(f"speed_modifier values must be > 0, got {self.speed_modifier}")
-        if any(b <= a for a, b in zip(self.speed_modifier, self.speed_modifier[1:], strict=False)):
-            raise ConfigError(f"speed_modifier must increase step by step, got {self.speed_modifier}")
-        if not 0 <= self.speed_idx < len(self.speed_modifier):
-            raise ConfigError(
-                f"speed_idx {self.speed_idx} is outside the ladder [0, {len(self.speed_modifier) - 1}]")
-        positive = ("calib_time", "calib_reminder_period", "behaviour_period", "rule_period",
-                    "hr_report_window", "hr_timeout", "video_time", "gesture_relaxing_speed")
-        for key in positive:
-            value = getattr(self, key)
-            if not (math.isfinite(value) and value > 0):
-                raise ConfigError(f"{key} must be > 0, got {value:g}")
-        if not (math.isfinite(self.resting_default) and 20 <= self.resting_default <= 150):
-            raise ConfigError(f"resting_default must be a plausible resting HR in [20, 150] bpm, "
-                              f"got {self.resting_default:g}")
-        if not 0 < self.hr_valid_min < self.hr_valid_max:
-            raise ConfigError(f"need 0 < hr_valid_min < hr_valid_max, got {self.hr_valid_min:g}, "
-                              f"{self.hr_valid_max:g}")
-        if not 0.0 <= self.max_invalid_fraction <= 1.0:
-            raise ConfigError(f"max_invalid_fraction must be in [0, 1], got {self.max_invalid_fraction:g}")
-        for key in ("min_valid_samples", "calib_min_samples"):
-            if getattr(self, key) < 1:
-                raise ConfigError(f"{key} must be >= 1, got {getattr(self, key)}")
-        if self.buffer < self.min_valid_samples:
-            raise ConfigError(f"buffer ({self.buffer}) must hold at least min_valid_samples "
-                              f"({self.min_valid_samples})")
-        if self.adapt_refractory_period < 0:
-            raise ConfigError(f"adapt_refractory_period must be >= 0 s, got {self.adapt_refractory_period:g}")
-        if self.adapt_warmup_max_speedups < -1:
-            raise ConfigError(f"adapt_warmup_max_speedups must be >= 0 (or -1 for no cap), "
-                              f"got {self.adapt_warmup_max_speedups}")
-        for key in ("speech_motivation", "speech_faster", "speech_slower", "speech_cooldown",
-                    "speech_relaxation", "emotion_motivation"):
-            if not getattr(self, key):
-                raise ConfigError(f"{key} must list at least one entry")
-        for key in ("audio_path", "video_path", "audio_exercise_base"):
-            if "{}" not in getattr(self, key):
-                raise ConfigError(
-                    f"{key} must contain '{{}}' where the name goes, got {getattr(self, key)!r}")
-        return self
 
-    def replace(self, **changes: Any) -> CoachConfig:
-        return config_from_mapping({**self.as_dict(), **changes})
+class CoachNodeConfig(CoachConfig):
+    """``qt_physio_coach``'s options: the session's, plus its topics and timing."""
 
-    def as_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
+    hr_topic: str = option(topics.POLAR_H10_HR, "heart-rate frames [t, bpm] (std_msgs/Float64MultiArray)",
+                           min_length=1)
+    command_topic: str = option(topics.QT_COMMANDS, "robot command lines out (qt_controller's input)",
+                                min_length=1)
+    reply_topic: str = option(topics.QT_REPLIES, "qt_controller's JSON replies in", min_length=1)
+    events_topic: str = option(topics.COACH_EVENTS, "one JSON object per decision out", min_length=1)
+    state_topic: str = option(topics.COACH_STATE, "the latest state (latched) out", min_length=1)
+    control_topic: str = option(topics.COACH_CONTROL, "control words in: start, stop", min_length=1)
+    interactive: bool = option(False, "wait for 'start' on stdin or the control topic before starting",
+                               switch=True)
+    tick_period: float = option(0.1, "how often the session is advanced on ROS time (under sim time "
+                                "keep each /clock step <= it)", unit="s", gt=0)
 
 
-# Types of every key, for checking YAML and ROS parameter values.
-_FIELDS = {f.name: f for f in fields(CoachConfig)}
-SCALAR_KEYS = tuple(name for name, f in _FIELDS.items() if f.type in ("str", "bool", "int", "float"))
+def load_config(path: str | Path | None = None, overrides: Mapping[str, Any] | None = None,
+                config_cls: type[CoachConfig] = CoachConfig) -> CoachConfig:
+    """Defaults < the YAML file (flat or the coach's ROS params section) < ``overrides``; validated.
 
-
-def _coerce(key: str, value: Any, source: str) -> Any:
-    kind = _FIELDS[key].type
-    bad = ConfigError(f"{source}: {key} must be {kind}, got {value!r}")
-    if kind == "bool":
-        if not isinstance(value, bool):
-            raise bad
-        return value
-    if kind == "int":
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise bad
-        return value
-    if kind == "float":
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise bad
-        return float(value)
-    if kind == "str":
-        if not isinstance(value, str):
-            raise bad
-        return value
-    if kind == "list[float]":
-        if not isinstance(value, list) or any(isinstance(v, bool) or not isinstance(v, int | float | str)
-                                              for v in value):
-            raise ConfigError(f"{source}: {key} must be a list of numbers, got {value!r}")
-        try:
-            return [float(v) for v in value]
-        except ValueError:
-            raise ConfigError(f"{source}: {key} must be a list of numbers, got {value!r}") from None
-    if kind == "list[str]":
-        if not isinstance(value, list) or any(isinstance(v, dict | list) or v is None for v in value):
-            raise ConfigError(f"{source}: {key} must be a list of texts, got {value!r}")
-        return [str(v) for v in value]
-    raise AssertionError(f"unhandled config type {kind}")
-
-
-def config_from_mapping(values: Mapping[str, Any], source: str = "configuration") -> CoachConfig:
-    """A validated :class:`CoachConfig` from a mapping of keys (unknown keys are errors)."""
-    unknown = sorted(set(values) - set(_FIELDS))
-    if unknown:
-        raise ConfigError(f"{source}: unknown key(s) {unknown}")
-    coerced = {k: _coerce(k, v, source) for k, v in values.items()}
-    return CoachConfig(**coerced).validate()
-
-
-def read_config_file(path: str | Path, node_name: str = "qt_physio_coach") -> dict[str, Any]:
-    """The key/value mapping of a YAML file: flat (the seed's format) or a ROS params file."""
-    p = Path(path)
-    if not p.is_file():
-        raise ConfigError(f"configuration file {p} does not exist")
-    try:
-        data = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
-        raise ConfigError(f"configuration file {p} is not valid YAML{where}") from None
-    if data is None:
-        return {}
-    if not isinstance(data, dict):
-        raise ConfigError(f"configuration file {p} must hold key: value pairs")
-    for key in (node_name, f"/{node_name}", "/**"):
-        section = data.get(key)
-        if isinstance(section, dict) and isinstance(section.get("ros__parameters"), dict):
-            return dict(section["ros__parameters"])
-    return data
-
-
-def load_config(path: str | Path | None = None, overrides: Mapping[str, Any] | None = None) -> CoachConfig:
-    """Defaults < the YAML file < ``overrides``; validated."""
-    values: dict[str, Any] = {}
-    source = "configuration"
+    Raises :class:`ConfigError` (one line naming the key) on anything invalid.
+    """
     if path:
-        values.update(read_config_file(path))
-        source = str(path)
-    values.update(overrides or {})
-    return config_from_mapping(values, source)
+        return config_cls.from_file(path, COACH_NODE, overrides)
+    return config_cls.from_mapping(dict(overrides or {}), "configuration")
 
 
 def participant_id(name: str, age: float, salt: str = "") -> str:

@@ -201,6 +201,12 @@ class ScenarioEngine:
         self.now = max(self.now, now)
         return ran
 
+    def next_due(self) -> float | None:
+        """When the next pending timer is due (None: nothing pending), for event-driven drivers."""
+        while self._queue and self._queue[0].cancelled:
+            heapq.heappop(self._queue)
+        return self._queue[0].time if self.state == RUNNING and self._queue else None
+
     def run_to_end(self, step: float = 1.0, before_tick: Callable[[float], None] | None = None) -> None:
         """Drive the whole session on a fake clock in ``step``-second ticks (tests, simulations)."""
         if self.state == IDLE:

@@ -11,6 +11,8 @@ import math
 from collections import deque
 from dataclasses import dataclass
 
+from hri_physio_coach.gates import NO_HR_DATA, SIGNAL_FLAGGED, TOO_FEW_SAMPLES, Gate
+
 
 @dataclass(frozen=True)
 class BufferStats:
@@ -88,16 +90,17 @@ class HeartRateMonitor:
         self.clear()
         return stats
 
-    def gate(self, stats: BufferStats, now: float) -> str | None:
+    def gate(self, stats: BufferStats, now: float) -> Gate | None:
         """Why a rule update must not adapt on ``stats`` (None: it may)."""
         if self.lost:
             since = self.silent_since if self.silent_since is not None else now
-            return f"no heart-rate data for {now - since:.0f} s: adaptation paused"
-        if stats.n_valid < self.min_valid:
-            return f"too few valid HR samples: {stats.n_valid} < {self.min_valid}"
+            return Gate(NO_HR_DATA, f"no heart-rate data for {now - since:.0f} s: adaptation paused")
+        if stats.n_valid < self.min_valid or stats.mean is None:
+            return Gate(TOO_FEW_SAMPLES, f"too few valid HR samples: {stats.n_valid} < {self.min_valid}")
         if stats.bad_fraction > self.max_bad_fraction:
-            return (f"signal flagged: {stats.n_invalid + stats.n_flagged} of {stats.n_total} samples invalid "
-                    f"or flagged (> {self.max_bad_fraction:.0%})")
+            return Gate(SIGNAL_FLAGGED,
+                        f"signal flagged: {stats.n_invalid + stats.n_flagged} of {stats.n_total} samples "
+                        f"invalid or flagged (> {self.max_bad_fraction:.0%})")
         return None
 
     def recent_mean(self, now: float, window: float | None = None) -> float | None:

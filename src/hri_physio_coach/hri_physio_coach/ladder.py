@@ -9,16 +9,9 @@ from __future__ import annotations
 
 import itertools
 import math
-import re
 from collections.abc import Sequence
 
-_NUMBER = re.compile(r"\d+(?:\.\d+)?")
-
-
-def tempo_of_suffix(suffix: str) -> float | None:
-    """The music tempo (BPM) an audio suffix names, e.g. ``"125"`` -> 125.0 (None if none)."""
-    match = _NUMBER.search(suffix)
-    return float(match.group()) if match else None
+from hri_physio_coach.media_names import tempo_from_name
 
 
 class SpeedLadder:
@@ -56,7 +49,7 @@ class SpeedLadder:
 
     @property
     def tempo(self) -> float | None:
-        return tempo_of_suffix(self.suffix)
+        return tempo_from_name(self.suffix)
 
     @property
     def at_top(self) -> bool:

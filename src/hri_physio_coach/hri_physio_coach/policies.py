@@ -15,6 +15,7 @@ import random
 from dataclasses import asdict, dataclass
 from typing import Protocol
 
+from hri_physio_coach import gates
 from hri_physio_coach.ladder import SpeedLadder
 from hri_physio_coach.zones import HeartRateZone, fuzzy_probability
 
@@ -26,11 +27,33 @@ HOLD = "hold"  # an option suppressed adaptation (refractory, phase restriction,
 AT_LIMIT = "at_limit"  # the policy asked for a step beyond the end of the ladder
 SCHEDULED_SLOW_DOWN = "scheduled_slow_down"  # cool-down schedule
 GATED = "gated"  # no trustworthy heart rate: no update at all (decided by the coach)
+CHANGE_ACTIVITY = "change_activity"  # a policy that picks activities chose another one (maybe another step)
+#: A proposal's ``level`` that hands the choice of activity back to the routine (no cost is below 1 MET).
+FOLLOW_ROUTINE = 0.0
+OUT_OF_REACH = "out_of_reach"  # the zone cannot be reached with the controls at hand (said once)
+
+_UNCHANGED = object()  # a decision that did not change the activity cost
 
 # Phase kinds the options refer to.
 WARM_UP = "warm_up"
 CONDITIONING = "conditioning"
 COOL_DOWN = "cool_down"
+
+
+@dataclass(frozen=True)
+class Controls:
+    """What the participant is doing and what the coach may change (for policies that use it)."""
+
+    activity: str | None  # the activity being performed (the routine's, or the one run in its place)
+    mets: float | None  # its stated cost (None: the routine states none)
+    chosen: float | None  # the activity cost the policy holds (None: the routine's activities)
+    levels: tuple[float, ...]  # activity costs the coach can run (empty: no activity choice)
+    speeds: tuple[float, ...]  # the ladder's gesture speeds ...
+    tempos: tuple[float | None, ...]  # ... and music tempos
+    index: int  # the ladder step
+    window_start: float  # the rule update's HR mean covers (window_start, t]
+    # Per phase kind, the (duration, cost) of the routine's own activities that state a cost.
+    routine_costs: tuple[tuple[str, tuple[tuple[float, float], ...]], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -43,16 +66,23 @@ class RuleInput:
     phase: str
     phase_start: float
     phase_end: float
+    controls: Controls | None = None
 
 
 @dataclass(frozen=True)
 class Proposal:
-    """A policy's proposal: a ladder step (-1, 0, +1) and why."""
+    """A policy's proposal: a ladder step (-1, 0, +1) and why.
+
+    Policies that pick activities may also give the activity cost to run from now on
+    (``level``, METs) and a one-off ``notice`` (e.g. the zone is out of reach).
+    """
 
     delta: int
     reason: str
     p: float | None = None
     draw: float | None = None
+    level: float | None = None
+    notice: str | None = None
 
 
 class Policy(Protocol):
@@ -108,17 +138,21 @@ class StaticPolicy:
         return Proposal(0, "static policy never adapts")
 
 
-POLICY_NAMES = ("threshold", "fuzzy", "static")
+POLICY_NAMES = ("threshold", "fuzzy", "static", "predictive")
 
 
 def make_policy(name: str, seed: int | None = 0) -> Policy:
-    """A policy by name (``threshold``, ``fuzzy``, ``static``)."""
+    """A policy by name (``threshold``, ``fuzzy``, ``static``, ``predictive``)."""
     if name == "threshold":
         return ThresholdPolicy()
     if name == "fuzzy":
         return FuzzyPolicy(seed)
     if name == "static":
         return StaticPolicy()
+    if name == "predictive":
+        from hri_physio_coach.predictive import PredictivePolicy  # it builds on this module's types
+
+        return PredictivePolicy()
     raise ValueError(f"unknown adaptation policy {name!r}; choose one of {', '.join(POLICY_NAMES)}")
 
 
@@ -155,10 +189,14 @@ class Decision:
     index_after: int
     p: float | None = None
     draw: float | None = None
+    gate: str | None = None  # gated or held: why, as a code of hri_physio_coach.gates
+    level_before: float | None = None  # activity cost held by the policy (None: the routine's)
+    level_after: float | None = None
+    notice: str | None = None
 
     @property
     def changed(self) -> bool:
-        return self.delta != 0
+        return self.delta != 0 or self.level_before != self.level_after
 
     def as_dict(self) -> dict[str, object]:
         return {**asdict(self), "changed": self.changed}
@@ -174,21 +212,59 @@ class Adapter:
         self.last_adaptation: float | None = None
         self.warmup_speedups = 0
         self._cooldown_from: int | None = None
+        self.level: float | None = None  # activity cost the policy holds (None: the routine's activities)
+
+    @property
+    def chooses_activity(self) -> bool:
+        """True when the policy may run other activities of the routine in place of the routine's own."""
+        return bool(getattr(self.policy, "chooses_activity", False))
+
+    def observe(self, t: float, controls: Controls) -> None:
+        """What is performed from ``t`` on (activity start or switch, ladder step), for learning policies."""
+        observe = getattr(self.policy, "observe", None)
+        if observe is not None:
+            observe(t, controls)
 
     def _decision(self, inp: RuleInput | None, t: float, action: str, reason: str, before: int,
-                  proposal: Proposal | None = None) -> Decision:
+                  proposal: Proposal | None = None, gate: str | None = None,
+                  level_before: float | object | None = _UNCHANGED) -> Decision:
         return Decision(
             t=t, policy=self.policy.name, action=action, delta=self.ladder.index - before,
             proposed=proposal.delta if proposal else 0, reason=reason,
             hr=inp.hr if inp else None, zone_state=inp.zone.classify(inp.hr) if inp else None,
             index_before=before, index_after=self.ladder.index,
-            p=proposal.p if proposal else None, draw=proposal.draw if proposal else None,
+            p=proposal.p if proposal else None, draw=proposal.draw if proposal else None, gate=gate,
+            level_before=self.level if level_before is _UNCHANGED else level_before,  # type: ignore[arg-type]
+            level_after=self.level,
+            notice=proposal.notice if proposal else None,
         )
 
-    def gated(self, t: float, reason: str, hr: float | None = None) -> Decision:
-        """A rule update that could not run (no trustworthy heart rate)."""
+    def plan(self, inp: RuleInput) -> Decision | None:
+        """At a phase start, what a policy that plans phases wants for it (None: nothing changes)."""
+        plan = getattr(self.policy, "plan", None)
+        proposal = plan(inp) if plan is not None else None
+        if proposal is None:
+            return None
+        before, level_before = self.ladder.index, self.level
+        if proposal.level is not None:
+            self.level = None if proposal.level == FOLLOW_ROUTINE else proposal.level
+        self.ladder.step(proposal.delta)
+        if self.ladder.index == before and self.level == level_before:
+            return None
+        self.last_adaptation = inp.t
+        if inp.phase == COOL_DOWN and self.ladder.index <= before:
+            action = SCHEDULED_SLOW_DOWN
+        elif self.level != level_before:
+            action = CHANGE_ACTIVITY
+        else:
+            action = SPEED_UP if self.ladder.index > before else SLOW_DOWN
+        return self._decision(inp, inp.t, action, proposal.reason, before, proposal,
+                              level_before=level_before)
+
+    def gated(self, t: float, reason: str, hr: float | None = None, gate: str | None = None) -> Decision:
+        """A rule update that could not run (no trustworthy heart rate); ``gate`` is its code."""
         i = self.ladder.index
-        return Decision(t, self.policy.name, GATED, 0, 0, reason, hr, None, i, i)
+        return Decision(t, self.policy.name, GATED, 0, 0, reason, hr, None, i, i, gate=gate)
 
     def update(self, inp: RuleInput) -> Decision:
         opts, before = self.options, self.ladder.index
@@ -196,21 +272,27 @@ class Adapter:
             return self._scheduled(inp, before)
         if opts.conditioning_only and inp.phase != CONDITIONING:
             reason = f"adaptation restricted to conditioning (phase {inp.phase})"
-            return self._decision(inp, inp.t, HOLD, reason, before)
+            return self._decision(inp, inp.t, HOLD, reason, before, gate=gates.CONDITIONING_ONLY)
         if opts.refractory and self.last_adaptation is not None:
             since = inp.t - self.last_adaptation
             if since < opts.refractory_period:
                 return self._decision(
                     inp, inp.t, HOLD,
                     f"refractory: {since:.0f} s since the last update < {opts.refractory_period:g} s", before,
+                    gate=gates.REFRACTORY,
                 )
         proposal = self.policy.propose(inp)
+        level_before = self.level
+        level = None if proposal.level == FOLLOW_ROUTINE else proposal.level
+        if proposal.level is not None and level != self.level:
+            return self._change_activity(inp, proposal, before, level_before)
         if proposal.delta == 0:
-            return self._decision(inp, inp.t, ENCOURAGE, proposal.reason, before, proposal)
+            action = OUT_OF_REACH if proposal.notice else ENCOURAGE
+            return self._decision(inp, inp.t, action, proposal.reason, before, proposal)
         cap = opts.warmup_max_speedups
         if proposal.delta > 0 and inp.phase == WARM_UP and cap is not None and self.warmup_speedups >= cap:
             return self._decision(inp, inp.t, HOLD, f"{proposal.reason}; warm-up speed-up cap {cap} reached",
-                                  before, proposal)
+                                  before, proposal, gate=gates.WARMUP_CAP)
         if not self.ladder.step(proposal.delta):
             end = "fastest" if proposal.delta > 0 else "slowest"
             return self._decision(inp, inp.t, AT_LIMIT, f"{proposal.reason}; already at the {end} step",
@@ -221,6 +303,16 @@ class Adapter:
         action = SPEED_UP if proposal.delta > 0 else SLOW_DOWN
         return self._decision(inp, inp.t, action, proposal.reason, before, proposal)
 
+    def _change_activity(self, inp: RuleInput, proposal: Proposal, before: int,
+                         level_before: float | None) -> Decision:
+        """Another activity cost, or the routine's own (and maybe another step, kept within the ladder)."""
+        self.level = None if proposal.level == FOLLOW_ROUTINE else proposal.level
+        target = min(max(before + proposal.delta, 0), len(self.ladder) - 1)
+        self.ladder.step(target - before)
+        self.last_adaptation = inp.t
+        return self._decision(inp, inp.t, CHANGE_ACTIVITY, proposal.reason, before, proposal,
+                              level_before=level_before)
+
     def _scheduled(self, inp: RuleInput, before: int) -> Decision:
         """Cool-down: the ladder falls linearly from its cool-down start to the bottom by the end."""
         if self._cooldown_from is None:
@@ -230,7 +322,7 @@ class Adapter:
         target = math.floor(self._cooldown_from * remaining / duration + 1e-9)
         if target >= before:
             return self._decision(inp, inp.t, HOLD, f"cool-down schedule: step {before} is on schedule "
-                                  f"(target {target})", before)
+                                  f"(target {target})", before, gate=gates.COOLDOWN_SCHEDULE)
         self.ladder.step(target - before)
         return self._decision(inp, inp.t, SCHEDULED_SLOW_DOWN,
                               f"cool-down schedule: step {before} -> {target} "

@@ -22,6 +22,11 @@ Example::
 
 A duration or an ``after`` may name a variable (e.g. ``duration: calib_time``) supplied by
 the scenario's configuration when the routine is loaded.
+
+An activity may state its approximate metabolic cost, ``mets: 5.8`` (METs at the ladder's
+middle tempo). Activities with a cost are the *choices* a policy that picks activities may
+run in place of the routine's own, within the same phase and durations
+(:meth:`Routine.choices`).
 """
 
 from __future__ import annotations
@@ -62,6 +67,12 @@ class Activity:
     attrs: Mapping[str, Any] = field(default_factory=dict)  # any other keys: gesture, video, ...
     on_enter: tuple[Action, ...] = ()
 
+    @property
+    def mets(self) -> float | None:
+        """The stated metabolic cost in METs (None: not stated, not a choice)."""
+        value = self.attrs.get("mets")
+        return None if value is None else float(value)
+
 
 @dataclass(frozen=True)
 class Phase:
@@ -94,6 +105,20 @@ class Routine:
             if p.name == name:
                 return p
         raise KeyError(name)
+
+    def choices(self, phase: str | None = None) -> tuple[Activity, ...]:
+        """Activities with a stated cost, one per name, from ``phase`` first, then the rest of the routine.
+
+        A policy that picks activities prefers those of the phase it is in; the others serve
+        when the phase has none at the cost it wants (e.g. marching in a phase of steps).
+        """
+        ordered = [p for p in self.phases if p.name == phase] + [p for p in self.phases if p.name != phase]
+        seen: dict[str, Activity] = {}
+        for p in ordered:
+            for a in p.activities:
+                if a.mets is not None and a.name not in seen:
+                    seen[a.name] = a
+        return tuple(seen.values())
 
     def without(self, names: Iterable[str]) -> Routine:
         """The routine with the named phases (or phase kinds) left out."""
@@ -199,6 +224,9 @@ def parse_routine(raw: Any, variables: Mapping[str, float] | None = None, source
             awhere = f"{where}, activity {a['name']!r}"
             if "duration" not in a:
                 raise RoutineError(f"{awhere}: missing 'duration'")
+            mets = a.get("mets")
+            if mets is not None and (not _is_number(mets) or mets < 1):
+                raise RoutineError(f"{awhere}: mets must be a number >= 1 (the cost in METs), got {mets!r}")
             activities.append(Activity(
                 name=str(a["name"]),
                 duration=_duration(a["duration"], awhere, variables),

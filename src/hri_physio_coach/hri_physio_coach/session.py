@@ -8,13 +8,17 @@ Starts, as separate processes (the console scripts a lab would run):
 * ``neurokit_processor`` - ECG -> HR/HRV features (``/physio/polar_h10/ecg/...``);
 * ``qt_physio_coach`` - the exercise coach, adapting on the strap's HR (or the processor's);
 * ``qt_controller`` + ``mock_qt_robot`` - the robot side;
-* ``recorder`` - every topic into a rosbag2 (MCAP) directory.
+* ``physio_recorder`` - every topic into a rosbag2 (MCAP) directory.
 
-This process drives ``/clock`` (every node but the receivers, processor and recorder runs on
-sim time), so the 23-minute routine runs ``--speed`` times faster than real time (1 = real
-time). It waits until the robot side is up and heart rate reaches the coach's input, then sends
-``start`` to the coach, prints live progress, and when the coach ends the session stops every
-process cleanly (the recorder last) and prints a summary.
+Every node's configuration is checked before anything starts. The session gets a folder of its
+own, ``<out>/<participant id>_<date-time>/`` (bag, ``logs/<node>.log``, ``configs/<node>.yaml``,
+``summary.json``, the report), a ROS domain of its own (claimed, so two sessions on one machine
+never mix) and LSL stream names of its own. This process drives ``/clock`` (every node but the
+receivers, processor and recorder runs on sim time), so the 23-minute routine runs ``--speed``
+times faster than real time. It waits until the robot side is up and heart rate reaches the
+coach's input, sends ``start`` to the coach, shows one live progress display (plain lines when
+the output is not a terminal; every node line with ``--verbose``), and when the coach ends the
+session stops every process cleanly (the recorder last), prints a summary and the folder.
 """
 
 from __future__ import annotations
@@ -23,63 +27,106 @@ import argparse
 import contextlib
 import json
 import math
+import os
+import signal
 import sys
 import threading
 import time
+import traceback
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from datetime import datetime
-from pathlib import Path
+from typing import Any
 
-from hri_physio_bridge.bag.topics import bag_name
-from hri_physio_bridge.launcher import ProcessGroup
-from hri_physio_bridge.nodes.common import install_stop_handlers
+from hri_physio_bridge import topics
+from hri_physio_bridge.config import ConfigError, add_config_arguments, given_options
+from hri_physio_bridge.launcher import ManagedProcess, ProcessGroup
+from hri_physio_bridge.node_runner import OneLineErrorParser
 from hri_physio_bridge.ros_tools import BackgroundNode, clock_message
-from hri_physio_coach.session_view import CLOCK_STEP, SessionView, SimClock, summary
+from hri_physio_bridge.stop_signals import install_stop_handlers
+from hri_physio_bridge.waiting import wait_until
+from hri_physio_coach.session_console import (
+    LiveConsole,
+    PlainConsole,
+    Progress,
+    SessionConsole,
+    VerboseConsole,
+)
+from hri_physio_coach.session_folder import SessionFolder
+from hri_physio_coach.session_isolation import (
+    DomainClaim,
+    DomainInUse,
+    claim_domain,
+    holder_info,
+    new_device_id,
+    parse_domain,
+)
+from hri_physio_coach.session_options import PROG, SessionConfig
+from hri_physio_coach.session_plan import (
+    COACH,
+    CONTROLLER,
+    MOCK,
+    PARTICIPANT,
+    SessionPlan,
+    coach_config,
+    plan_session,
+)
+from hri_physio_coach.session_view import SessionView, SimClock, overdue, session_counts, summary
 
-HR_TOPIC = "/physio/polar_h10/hr"
-ECG_TOPIC = "/physio/polar_h10/ecg"
-ECG_HR_TOPIC = "/physio/polar_h10/ecg/hr"
-#: Valid HR samples a rule update needs when the coach listens to the processor's HR.
-ECG_HR_MIN_SAMPLES = 3
-#: Seconds without HR before the coach pauses adaptation, on the processor's HR (4 hops).
-ECG_HR_TIMEOUT = 20.0
+#: Session seconds past the routine's end after which a coach that has not ended is stopped.
+END_MARGIN = 60.0
+#: Session seconds the clock runs on after the coach's end: the robot's last speech, the last events.
+TAIL = 10.0
+#: Wall seconds the system must look ready before 'start': publishers match their subscribers.
+SETTLE = 2.0
+CLOCK_DEPTH = 1000
 
 
 class ClockAndWatcher(BackgroundNode):
     """Publishes /clock and watches the session's topics, on its own executor thread."""
 
-    def __init__(self, view: SessionView, hr_topic: str) -> None:
-        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    def __init__(self, view: SessionView, hr_topic: str, receivers: list[str]) -> None:
         from rosgraph_msgs.msg import Clock
         from std_msgs.msg import Float64MultiArray, String
 
-        from hri_physio_bridge.qos import frame_qos
+        from hri_physio_bridge.qos import command_qos, event_qos, frame_qos, latched_qos
         from hri_physio_bridge.ros_frames import msg_to_frame
 
         super().__init__("session_launcher")
         self._string_cls = String
         self.view = view
         self.lock = threading.Lock()
-        self.clock_pub = self.node.create_publisher(Clock, "/clock", 10)
-        self.control_pub = self.node.create_publisher(String, "/coach/control", 10)
+        # Deep: at high --speed hundreds of clock messages a second must reach the recorder too.
+        self.clock_pub = self.node.create_publisher(Clock, "/clock", CLOCK_DEPTH)
+        self.control_pub = self.node.create_publisher(String, topics.COACH_CONTROL, command_qos())
+        strap = hr_topic == topics.POLAR_H10_HR
 
         def on_hr(msg: Float64MultiArray) -> None:
             frame = msg_to_frame(msg)
             with self.lock:
                 for bpm in frame.values[:, -1]:
                     view.on_hr(float(bpm))
-                if hr_topic == HR_TOPIC:
+                if strap:
                     view.strap_samples += frame.num_samples
+
+        def on_strap(msg: Float64MultiArray) -> None:
+            with self.lock:
+                view.strap_samples += msg_to_frame(msg).num_samples
 
         def on_json(apply: Callable[[dict], None]) -> Callable[[String], None]:
             def callback(msg: String) -> None:
                 try:
                     data = json.loads(msg.data)
-                except json.JSONDecodeError:
+                except ValueError:
                     return  # not ours to judge: the recorder keeps the raw message
-                with self.lock:
-                    apply(data)
+                if isinstance(data, dict):
+                    with self.lock:
+                        apply(data)
             return callback
+
+        def on_event(msg: String) -> None:
+            with self.lock:
+                view.on_event_text(msg.data)
 
         def set_state(data: dict) -> None:
             view.state = data
@@ -90,19 +137,18 @@ class ClockAndWatcher(BackgroundNode):
         def count_action(_data: dict) -> None:
             view.robot_actions += 1
 
-        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        def on_strap(msg: Float64MultiArray) -> None:
-            with self.lock:
-                view.strap_samples += msg_to_frame(msg).num_samples
+        def receiver_status(node: str) -> Callable[[dict], None]:
+            return lambda data: view.receivers.__setitem__(node, data)
 
         self.node.create_subscription(Float64MultiArray, hr_topic, on_hr, frame_qos())
-        if hr_topic != HR_TOPIC:
-            self.node.create_subscription(Float64MultiArray, HR_TOPIC, on_strap, frame_qos())
-        self.node.create_subscription(String, "/coach/state", on_json(set_state), latched)
-        self.node.create_subscription(String, "/coach/events", on_json(view.on_event), 1000)
-        self.node.create_subscription(String, "/participant/state", on_json(set_model), 100)
-        self.node.create_subscription(String, "/qt_robot/mock/events", on_json(count_action), 1000)
+        if not strap:
+            self.node.create_subscription(Float64MultiArray, topics.POLAR_H10_HR, on_strap, frame_qos())
+        self.node.create_subscription(String, topics.COACH_STATE, on_json(set_state), latched_qos())
+        self.node.create_subscription(String, topics.COACH_EVENTS, on_event, event_qos())
+        self.node.create_subscription(String, topics.PARTICIPANT_STATE, on_json(set_model), event_qos(100))
+        self.node.create_subscription(String, topics.QT_MOCK_EVENTS, on_json(count_action), event_qos())
+        for node in receivers:
+            self.node.create_subscription(String, f"/{node}/status", on_json(receiver_status(node)), 10)
         self.start()
 
     def publish_clock(self, t: float) -> None:
@@ -111,204 +157,301 @@ class ClockAndWatcher(BackgroundNode):
     def send_start(self) -> None:
         self.control_pub.publish(self._string_cls(data="start"))
 
-    def count_subscribers(self, topic: str) -> int:
-        return self.node.count_subscribers(topic)
+    def subscriber_nodes(self, topic: str) -> set[str]:
+        return {info.node_name for info in self.node.get_subscriptions_info_by_topic(topic)}
+
+    def robot_side_ready(self) -> bool:
+        """The controller and the participant hear the robot commands, the coach its control topic,
+        the mock robot the controller's speech."""
+        return ({CONTROLLER, PARTICIPANT} <= self.subscriber_nodes(topics.QT_COMMANDS)
+                and COACH in self.subscriber_nodes(topics.COACH_CONTROL)
+                and MOCK in self.subscriber_nodes(topics.QT_SPEECH_SAY))
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="hri_physio_session",
+    p = OneLineErrorParser(
+        prog=PROG, formatter_class=argparse.RawDescriptionHelpFormatter,
         description="The closed loop on the built-in defaults: simulated participant (Polar H10 on LSL) -> "
-        "physio_receiver -> qt_physio_coach -> qt_controller -> mock_qt_robot, recorded to a bag.",
+        "physio_receiver -> qt_physio_coach -> qt_controller -> mock_qt_robot, recorded to a bag, in a "
+        "session folder of its own (bag, logs/, configs/, summary.json, report).",
         epilog="Examples: hri_physio_session  |  hri_physio_session --speed 1 --policy fuzzy  |  "
-        "hri_physio_session --routine my_routine.yaml --no-record",
+        "hri_physio_session --routine my_routine.yaml --out /data/study1\n\n"
+        "Isolation: the session claims a ROS domain of its own (a free one, printed at the start; or "
+        "ROS_DOMAIN_ID if you export it, refused while another session holds it) and LSL stream names "
+        "of its own (--device-id).",
     )
-    p.add_argument("--speed", type=float, default=30.0,
-                   help="sim seconds per wall second once the session starts (default 30: the 23-min "
-                        "routine in about 46 s; 1 = real time)")
-    p.add_argument("--policy", choices=("threshold", "fuzzy", "static"), default="threshold",
-                   help="adaptation policy (default threshold)")
-    p.add_argument("--age", type=float, default=33.0, help="participant age, years (default 33)")
-    p.add_argument("--participant-seed", type=int, default=1,
-                   help="seed of the simulated participant's variability (default 1)")
-    p.add_argument("--hr-source", choices=("strap", "ecg"), default="strap",
-                   help=f"coach input: the strap's HR ({HR_TOPIC}, default) or the processor's "
-                        f"HR from ECG ({ECG_HR_TOPIC})")
-    p.add_argument("--conf", type=Path, help="coach YAML file (default: the packaged coach.yaml)")
-    p.add_argument("--routine", type=Path, help="routine YAML file (default: the packaged routine)")
-    p.add_argument("--bag-dir", type=Path, default=Path("bags"),
-                   help="where the session's bag directory is created (default bags/)")
-    p.add_argument("--no-record", action="store_true", help="do not record a bag")
-    p.add_argument("--no-ecg", action="store_true", help="do not stream ECG into ROS 2 nor process it")
-    p.add_argument("--device-id", default="SIM0001", help="simulated Polar device id (default SIM0001)")
-    p.add_argument("--startup-timeout", type=float, default=60.0,
-                   help="wall seconds to wait for the nodes and the first heart rate (default 60)")
-    p.add_argument("--quiet-nodes", action="store_true", help="do not echo the nodes' own log lines")
-    p.add_argument("--progress-period", type=float, default=2.0,
-                   help="wall seconds between progress lines (default 2)")
+    add_config_arguments(p, SessionConfig)
+    for group in p._action_groups:  # the launcher's options are not ROS parameters
+        if group.title and group.title.startswith("options (also"):
+            group.title = "session options"
     return p
 
 
-def _check(args: argparse.Namespace) -> str | None:
-    if not (math.isfinite(args.speed) and args.speed > 0):
-        return f"--speed must be > 0, got {args.speed:g}"
-    if not 0 < args.age <= 120:
-        return f"--age must be in (0, 120] years, got {args.age:g}"
-    for name in ("conf", "routine"):
-        path = getattr(args, name)
-        if path is not None and not path.is_file():
-            return f"--{name} {path} does not exist"
-    if args.hr_source == "ecg" and args.no_ecg:
-        return "--hr-source ecg needs the ECG path: drop --no-ecg"
-    return None
+@dataclass
+class Outcome:
+    """How the run went: what the exit status and summary.json say."""
+
+    code: int = 0
+    problem: str | None = None
+    stopped_by: str | None = None
+    wall: float = 0.0
+    node_codes: dict[str, int] = field(default_factory=dict)
+
+    def fail(self, problem: str, code: int = 1) -> None:
+        if self.problem is None:
+            self.problem, self.code = problem, code
 
 
-def start_nodes(group: ProcessGroup, args: argparse.Namespace, echo: bool) -> Path | None:
-    """Start every node; returns the bag directory the recorder writes (None: not recording)."""
-    sim = ["-p", "use_sim_time:=true"]
-    dev = args.device_id
-    bag: Path | None = None
-    if not args.no_record:
-        args.bag_dir.mkdir(parents=True, exist_ok=True)
-        bag = args.bag_dir / bag_name("session", datetime.now())
-        group.start("recorder", "recorder", ["-o", str(bag), "--session-id", "session",
-                                             "--discovery-period", "0.2", "--status-period", "10"], echo=echo)
-    joint_rate = f"joint_state_rate:={1 / CLOCK_STEP:.1f}"
-    group.start("mock", "mock_qt_robot", ["--ros-args", *sim, "-p", joint_rate], echo=echo)
-    group.start("controller", "qt_controller", ["--ros-args", *sim], echo=echo)
-    group.start("participant", "simulated_participant", [
-        "--ros-args", *sim, "-p", f"age:={args.age:.1f}", "-p", f"seed:={args.participant_seed}",
-        "-p", f"device_id:={dev}", "-p", f"update_period:={CLOCK_STEP:.3f}"], echo=echo)
-    # Each receiver holds its input until all of its listeners are there, so the bag and the
-    # coach (or processor) get every sample from the first: HR goes to this launcher's watcher,
-    # the recorder and (strap source) the coach; ECG to the processor and the recorder.
-    recorder = int(bag is not None)
-    streams = [("HR", HR_TOPIC, 1, 1.0, 1 + recorder + (args.hr_source == "strap"))]
-    if not args.no_ecg:
-        streams.append(("ECG", ECG_TOPIC, 13, 130.0, 1 + recorder))
-    for stream, topic, frame, rate, listeners in streams:
-        node = f"{stream.lower()}_receiver"
-        group.start(node, "physio_receiver", [
-            "--input", f"lsl:PolarH10/{dev}/{stream}", "--output", f"ros:{topic}",
-            "--output-frame", str(frame), "--sampling-rate", f"{rate:g}",
-            "--resolve-timeout", f"{args.startup_timeout:g}",
-            "--wait-for-consumers", f"{args.startup_timeout:g}", "--min-consumers", str(listeners),
-            "--ros-args", "-r", f"__node:={node}",
-        ], echo=echo)
-    if not args.no_ecg:
-        group.start("processor", "neurokit_processor", ["--input", f"ros:{ECG_TOPIC}"], echo=echo)
-    coach = ["--interactive", "--policy", args.policy]
-    if args.conf is not None:
-        coach += ["--conf", str(args.conf)]
-    hr_topic = ECG_HR_TOPIC if args.hr_source == "ecg" else HR_TOPIC
-    coach += ["--hr-topic", hr_topic, "--ros-args", *sim, "-p", f"part_age:={args.age:.1f}",
-              "-p", f"tick_period:={CLOCK_STEP:.3f}"]
-    if args.hr_source == "ecg":
-        # One processor HR per 5 s hop: 6 per 30 s rule update, below the strap's default of 10.
-        coach += ["-p", f"min_valid_samples:={ECG_HR_MIN_SAMPLES}", "-p", f"hr_timeout:={ECG_HR_TIMEOUT:.1f}"]
-    if args.routine is not None:
-        coach += ["-p", f"routine_file:={args.routine.resolve()}"]
-    group.start("coach", "qt_physio_coach", coach, echo=echo)
-    return bag
+def make_console(options: SessionConfig, title: str) -> SessionConsole:
+    if options.verbose:
+        return VerboseConsole(sys.stdout, options.progress_every)
+    if sys.stdout.isatty():
+        return LiveConsole(title)
+    return PlainConsole(sys.stdout, options.progress_every)
+
+
+def start_nodes(group: ProcessGroup, plan: SessionPlan, folder: SessionFolder) -> None:
+    for node in plan.nodes:
+        conf = folder.write_config(node.name, node.config_yaml())
+        group.start(node.name, node.script, node.argv(conf), echo=False, log_path=folder.log_file(node.name))
 
 
 def wait_for_system(watcher: ClockAndWatcher, group: ProcessGroup, clock: SimClock, view: SessionView,
                     stop: threading.Event, timeout: float) -> str | None:
     """Drive the clock until the robot side listens and heart rate reaches the coach's input."""
-    deadline = time.monotonic() + timeout
-    ready_since: float | None = None
-    while not stop.is_set():
+    ready_since: list[float] = []
+    dead: list[ManagedProcess] = []
+
+    def ready() -> bool:
         for t in clock.due_steps():
             watcher.publish_clock(t)
-        dead = [p for p in group.procs if p.returncode is not None]
+        dead[:] = [p for p in group.procs if p.returncode is not None]
         if dead:
-            tail = "\n".join(dead[0].lines[-5:])
-            return f"{dead[0].name} exited during start-up with code {dead[0].returncode}:\n{tail}"
+            return True
         with watcher.lock:
             # The strap's HR proves LSL -> ROS 2; the coach's own input must flow too (the
             # processor's first HR needs a full window of ECG).
             hr_flowing = view.strap_samples >= 2 and view.hr_seen >= 1
-        ready = (hr_flowing and watcher.count_subscribers("/coach/control") >= 1
-                 and watcher.count_subscribers("/QtController/input") >= 2  # controller, participant
-                 and watcher.count_subscribers("/qt_robot/speech/say") >= 1)
-        if ready:
-            ready_since = ready_since or time.monotonic()
-            if time.monotonic() - ready_since >= 2.0:  # let the publishers match their subscribers
-                return None
-        if time.monotonic() > deadline:
-            return (f"the system was not ready after {timeout:g} s (strap heart-rate samples on ROS 2: "
-                    f"{view.strap_samples}; subscribers of /QtController/input: "
-                    f"{watcher.count_subscribers('/QtController/input')})")
-        time.sleep(0.02)
-    return "interrupted during start-up"
+        if hr_flowing and watcher.robot_side_ready():
+            ready_since[:] = ready_since or [time.monotonic()]
+            return time.monotonic() - ready_since[0] >= SETTLE
+        return False
+
+    if wait_until(ready, timeout, stop=stop, poll=0.02):
+        if dead:
+            p = dead[0]
+            return f"{p.name} exited during start-up with status {p.returncode}: {p.error_line()}"
+        return None
+    if stop.is_set():
+        return "interrupted during start-up"
+    with watcher.lock:
+        strap = view.strap_samples
+    return (f"the system was not ready after {timeout:g} s (strap heart-rate samples on ROS 2: {strap}; "
+            f"robot side listening: {watcher.robot_side_ready()}); see the folder's logs/")
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    problem = _check(args)
-    if problem:
-        print(f"hri_physio_session: error: {problem}", file=sys.stderr)
-        return 2
-    stop = install_stop_handlers(lambda name: print(f"\n{name}: stopping the session", flush=True))
-    view = SessionView()
-    hr_topic = ECG_HR_TOPIC if args.hr_source == "ecg" else HR_TOPIC
-    watcher = ClockAndWatcher(view, hr_topic)
-    group = ProcessGroup()
+def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder, console: SessionConsole,
+                view: SessionView, group: ProcessGroup, stop: threading.Event, out: Outcome) -> SimClock:
+    """Start the nodes, wait for them, run the routine to its end (or a stop); returns the sim clock."""
+    receivers = [n.name for n in plan.nodes if n.script == "physio_receiver"]
+    watcher = ClockAndWatcher(view, plan.hr_topic, receivers)
     # The clock runs at --speed from the beginning: before 'start' the participant sits and the
     # processor fills its first window (60 s of ECG) without keeping the launcher waiting.
-    clock = SimClock(start=float(int(time.time())), speed=args.speed)
-    print(f"HRI Physio session: simulated participant (age {args.age:g}) -> LSL -> ROS 2 -> coach "
-          f"({args.policy}) -> mock QT robot, at {args.speed:g}x real time", flush=True)
-    code = 0
-    wall = 0.0
-    bag: Path | None = None
+    clock = SimClock(start=float(int(time.time())), speed=options.speed)
     try:
-        bag = start_nodes(group, args, echo=not args.quiet_nodes)
-        problem = wait_for_system(watcher, group, clock, view, stop, args.startup_timeout)
+        start_nodes(group, plan, folder)
+        problem = wait_for_system(watcher, group, clock, view, stop, options.startup_timeout)
         if problem:
-            print(f"hri_physio_session: error: {problem}", file=sys.stderr, flush=True)
-            return 1
-        coach = next(p for p in group.procs if p.name == "coach")
+            out.fail(problem)
+            return clock
+        coach = next(p for p in group.procs if p.name == COACH)
         watcher.send_start()
         wall0 = time.monotonic()
-        print(f"[session] system ready: session started at {args.speed:g}x", flush=True)
-        next_report = time.monotonic() + args.progress_period
-        while not stop.is_set() and coach.returncode is None:
+        console.say(f"[session] system ready: session started at {options.speed:g}x")
+
+        def finished() -> bool:
             for t in clock.due_steps():
                 watcher.publish_clock(t)
             dead = [p for p in group.procs if p.returncode is not None and p is not coach]
             if dead:
-                print(f"hri_physio_session: error: {dead[0].name} exited early with code "
-                      f"{dead[0].returncode}", file=sys.stderr, flush=True)
-                code = 1
-                break
-            if time.monotonic() >= next_report:
-                next_report += args.progress_period
-                with watcher.lock:
-                    print(view.progress(clock.t), flush=True)
-            time.sleep(0.01)
-        wall = time.monotonic() - wall0
+                p = dead[0]
+                out.fail(f"{p.name} exited early with status {p.returncode}: {p.error_line()}")
+                return True
+            with watcher.lock:
+                wall = time.monotonic() - wall0
+                progress = Progress.of(view, clock.t, plan.routine_duration, None)
+                if progress.elapsed and wall > 0:
+                    progress = Progress.of(view, clock.t, plan.routine_duration, progress.elapsed / wall)
+                late = overdue(view, clock.t, plan.routine_duration, END_MARGIN)
+            console.progress(progress)
+            if late:
+                out.fail(f"the coach did not end its session {END_MARGIN:g} s after the routine's end")
+                return True
+            return coach.returncode is not None
+
+        wait_until(finished, None, stop=stop, poll=0.01)
+        out.wall = time.monotonic() - wall0
         if coach.returncode not in (None, 0):
-            code = 1
-        # Let the robot finish its last speech and the last events reach us: a few more sim seconds.
-        end = clock.t + 10.0
-        while clock.t < end and not stop.is_set():
-            for t in clock.due_steps():
-                watcher.publish_clock(t)
-            time.sleep(0.01)
+            out.fail(f"{COACH} ended with status {coach.returncode}: {coach.error_line()}")
+        elif coach.returncode == 0:
+            # Let the robot finish its last speech and the last events reach us.
+            end = clock.t + TAIL
+
+            def tail_done() -> bool:
+                for t in clock.due_steps():
+                    watcher.publish_clock(t)
+                return clock.t >= end
+
+            wait_until(tail_done, None, stop=stop, poll=0.01)
+        return clock
     finally:
-        codes = group.stop()
+        if out.stopped_by:
+            console.say(f"{out.stopped_by}: stopping the session")
+        out.node_codes = group.stop()
         watcher.close()
-    recorded = str(bag) if bag is not None and bag.exists() else None
-    print(summary(view, wall, recorded, now=clock.t), flush=True)
-    bad = {name: c for name, c in codes.items() if c != 0}
-    if bad:
-        print(f"hri_physio_session: error: node exit codes {bad}", file=sys.stderr, flush=True)
-        code = 1
-    if not stop.is_set() and view.ended_at is None:
-        print("hri_physio_session: error: the session did not reach its end", file=sys.stderr, flush=True)
-        code = 1
-    return code
+
+
+def _write_report(folder: SessionFolder) -> list[str]:
+    """The session's report (hri_physio_report) into its folder; the names of the files written."""
+    from hri_physio_coach.report import make_report
+
+    result = make_report(folder.path)
+    return [p.name for p in result.files.values()]
+
+
+def _report(folder: SessionFolder, console: SessionConsole) -> list[str] | None:
+    # A second Ctrl-C may end the report (the session's data is safe by now).
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        files = _write_report(folder)
+    except KeyboardInterrupt:
+        console.say(f"{PROG}: warning: report interrupted (hri_physio_report {folder.display()} writes it)")
+        return None
+    except Exception as exc:  # the report must not cost the session's exit status: say it in one line
+        (folder.path / "logs").mkdir(exist_ok=True)
+        (folder.path / "logs" / "report.log").write_text(traceback.format_exc(), encoding="utf-8")
+        first = str(exc).splitlines()[0] if str(exc) else ""
+        console.say(f"{PROG}: warning: no report ({type(exc).__name__}: {first}; details in logs/report.log)")
+        return None
+    console.say(f"[session] report: {', '.join(files)}")
+    return files
+
+
+def _summary_json(options: SessionConfig, plan: SessionPlan, folder: SessionFolder, claim: DomainClaim,
+                  started: datetime, view: SessionView, out: Outcome, group: ProcessGroup,
+                  clock: SimClock | None, report: list[str] | None, running: bool = False) -> dict[str, Any]:
+    procs = {p.name: p for p in group.procs}
+    counts = session_counts(view)
+    if running:
+        outcome = "running"
+    elif view.conflict or out.code == 0:
+        outcome = counts["outcome"]  # finished, stopped (a signal), not started, conflict
+    else:
+        outcome = "failed"
+    return {
+        "participant": plan.coach.participant,
+        "folder": str(folder.path.resolve()),
+        "started": started.isoformat(timespec="seconds"),
+        "ended": None if running else datetime.now().isoformat(timespec="seconds"),
+        "outcome": outcome,
+        "exit_status": None if running else out.code,
+        "problem": out.problem,
+        "stopped_by": out.stopped_by,
+        "wall_seconds": round(out.wall, 3),
+        "speed": options.speed,
+        "sim_time_end": None if clock is None else clock.t,
+        "ros_domain": claim.domain,
+        "ros_domain_chosen": claim.chosen,
+        "lsl_device_id": plan.device_id,
+        "bag": None if options.no_record else folder.bag.name,
+        "options": options.model_dump(mode="json"),
+        "nodes": {
+            n.name: {"script": n.script, "config": f"configs/{n.name}.yaml", "log": f"logs/{n.name}.log",
+                     "argv": procs[n.name].argv[1:] if n.name in procs else None,
+                     "exit_status": out.node_codes.get(n.name)}
+            for n in plan.nodes
+        },
+        "session": counts,
+        "report": report,
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        options = SessionConfig.from_mapping(given_options(args, SessionConfig), "command line")
+        try:
+            requested = parse_domain(os.environ.get("ROS_DOMAIN_ID"))
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from None
+        coach = coach_config(options)
+        started = datetime.now()
+        device = options.device_id or new_device_id()
+        # Every node's configuration, checked before anything starts (on the folder it would get).
+        plan_session(options, SessionFolder.plan(options.out, coach.participant, started), device, coach)
+    except ConfigError as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr, flush=True)
+        return 2
+    folder = SessionFolder.plan(options.out, coach.participant, started)
+    try:
+        info = holder_info(folder.path.resolve(), started.isoformat(timespec="seconds"))
+        claim = claim_domain(requested, info)
+    except DomainInUse as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr, flush=True)
+        return 1
+    try:
+        os.environ["ROS_DOMAIN_ID"] = str(claim.domain)  # for this process's node and every child
+        for _ in range(100):
+            try:
+                folder.create()
+                break
+            except FileExistsError:  # the same participant started another session this second
+                folder = SessionFolder.plan(options.out, coach.participant, started)
+            except OSError as exc:
+                print(f"{PROG}: error: cannot create the session folder {folder.path}: {exc.strerror}",
+                      file=sys.stderr, flush=True)
+                return 1
+        plan = plan_session(options, folder, device, coach)
+        return _run(options, plan, folder, claim, started)
+    finally:
+        claim.release()
+
+
+def _run(options: SessionConfig, plan: SessionPlan, folder: SessionFolder, claim: DomainClaim,
+         started: datetime) -> int:
+    out = Outcome()
+    stop = install_stop_handlers(lambda name: setattr(out, "stopped_by", name))
+    console = make_console(options, f"HRI Physio session {plan.coach.participant}")
+    view = SessionView(warn=console.say)
+    group = ProcessGroup(on_line=console.node_line)
+    console.say(f"HRI Physio session {plan.coach.participant}: simulated participant (age {options.age:g}) "
+                f"-> LSL -> ROS 2 -> coach ({plan.coach.policy}) -> mock QT robot, "
+                f"at {options.speed:g}x real time")
+    domain = (f"ROS domain {claim.domain} (export ROS_DOMAIN_ID={claim.domain} to watch it)" if claim.chosen
+              else f"ROS domain {claim.domain} (ROS_DOMAIN_ID)")
+    console.say(f"[session] folder {folder.display()}; {domain}; LSL streams PolarH10/{plan.device_id}/*")
+    folder.write_summary(_summary_json(options, plan, folder, claim, started, view, out, group, None, None,
+                                       running=True))
+    clock: SimClock | None = None
+    try:
+        clock = run_session(options, plan, folder, console, view, group, stop, out)
+    finally:
+        console.close()
+        bag = folder.bag if not options.no_record and folder.bag.exists() else None
+        now = None if clock is None else clock.t
+        console.say(summary(view, out.wall, str(bag) if bag else None, now=now))
+        bad = {name: c for name, c in out.node_codes.items() if c != 0}
+        if bad and out.code == 0:
+            out.fail(f"node exit statuses {bad}")
+        if not stop.is_set() and view.ended_at is None and out.code == 0:
+            out.fail("the session did not reach its end")
+        report = _report(folder, console) if bag is not None and not options.no_report else None
+        folder.write_summary(_summary_json(options, plan, folder, claim, started, view, out, group, clock,
+                                           report))
+        if out.problem:
+            print(f"{PROG}: error: {out.problem}", file=sys.stderr, flush=True)
+        console.say(f"[session] session folder: {folder.display()}")
+    return out.code
 
 
 if __name__ == "__main__":

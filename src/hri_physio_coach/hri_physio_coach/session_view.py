@@ -3,21 +3,39 @@
 :class:`SessionView` is filled from the session's topics (coach state and events, heart rate,
 participant model, mock robot events) and turns them into progress lines and a summary;
 :class:`SimClock` says which ``/clock`` values are due, on an injected wall clock.
+
+Events arrive as text: :meth:`SessionView.on_event_text` takes every message of
+``/coach/events``; one that is not a JSON object with an ``event`` (or whose fields do not fit
+its kind) is counted by what is wrong with it and logged, rate-limited, never dropped silently.
+Rule updates that did not adapt are counted by their ``decision.gate`` code.
 """
 
 from __future__ import annotations
 
+import json
 import math
-import re
+import sys
 import time
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
+
+from hri_physio_bridge.rate_limit import RateLimitedLog
+from hri_physio_coach.gates import label
 
 #: Sim seconds per /clock message: no larger than any sim-time node's timer period
 #: (coach tick, participant update and the mock's joint states), or timers skip periods.
 CLOCK_STEP = 0.1
 EXERCISE_PHASES = ("warm_up", "conditioning", "cool_down")
+#: What can be wrong with a message on /coach/events (keys of :attr:`SessionView.malformed`).
+NOT_JSON, NOT_OBJECT, NO_EVENT, BAD_FIELDS = "not_json", "not_object", "no_event", "bad_fields"
+_MALFORMED_TEXT = {NOT_JSON: "is not JSON", NOT_OBJECT: "is not a JSON object",
+                   NO_EVENT: "has no \"event\" name", BAD_FIELDS: "has fields that do not fit its kind"}
+
+
+def _stderr(text: str) -> None:
+    print(text, file=sys.stderr, flush=True)
 
 
 @dataclass
@@ -33,28 +51,72 @@ class SessionView:
     zone: tuple[float, float] | None = None
     events: Counter[str] = field(default_factory=Counter)
     adaptations: int = 0
-    gated: Counter[str] = field(default_factory=Counter)  # rule updates that could not run, by reason
+    gated: Counter[str] = field(default_factory=Counter)  # rule updates that could not run, by gate code
+    held: Counter[str] = field(default_factory=Counter)  # rule updates an adapter option held, by gate code
+    malformed: Counter[str] = field(default_factory=Counter)  # event messages that could not be used, by kind
     exercise_hr: int = 0
     exercise_in_zone: int = 0
     robot_actions: int = 0
     started_at: float | None = None  # sim time of the coach's session_start / session_end
     ended_at: float | None = None
+    duration: float | None = None  # of the routine, from session_start
+    stopped: str | None = None  # why the coach stopped before the routine's end (session_stopped)
+    conflict: str | None = None  # the coach found another session on its topics (its reason)
+    #: The last status of each receiver (``/<node>/status``): samples received, published, gaps.
+    receivers: dict[str, dict] = field(default_factory=dict)
+    #: Where malformed-event lines go (rate-limited), and the clock of the rate limit.
+    warn: Callable[[str], None] = field(default=_stderr, repr=False, compare=False)
+    monotonic: Callable[[], float] = field(default=time.monotonic, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        self._log = RateLimitedLog(self.warn, monotonic=self.monotonic)
+
+    def on_event_text(self, text: str) -> bool:
+        """One message of /coach/events; False (counted, logged) when it could not be used."""
+        try:
+            event: Any = json.loads(text)
+        except (ValueError, TypeError):  # JSONDecodeError, or bytes that are not text
+            return self._malformed(NOT_JSON, text)
+        if not isinstance(event, dict):
+            return self._malformed(NOT_OBJECT, text)
+        if not isinstance(event.get("event"), str) or not event["event"]:
+            return self._malformed(NO_EVENT, text)
+        try:
+            self.on_event(event)
+        except (KeyError, TypeError, ValueError, AttributeError):
+            return self._malformed(BAD_FIELDS, text)
+        return True
+
+    def _malformed(self, kind: str, text: Any) -> bool:
+        self.malformed[kind] += 1
+        sample = str(text)[:80]
+        self._log.report(kind, f"[session] ignoring a message on the coach's events that "
+                         f"{_MALFORMED_TEXT[kind]}: {sample!r}", "such message(s)")
+        return False
 
     def on_event(self, event: dict) -> None:
+        """One decoded event; raises KeyError/TypeError/ValueError when its fields do not fit its kind."""
         kind = str(event.get("event"))
-        self.events[kind] += 1
         if kind == "session_start":
             self.started_at = float(event["t"])
+            self.duration = float(event["duration"]) if event.get("duration") is not None else None
         elif kind == "session_end":
             self.ended_at = float(event["t"])
         elif kind == "zone":
             self.zone = (float(event["low"]), float(event["high"]))
+        elif kind == "session_stopped":
+            self.stopped = str(event.get("reason") or "stopped")
+        elif kind == "conflict":
+            self.conflict = str(event.get("reason") or event.get("conflict") or "conflict")
         elif kind == "rule_update":
-            decision = event.get("decision", {})
-            self.adaptations += int(bool(decision.get("changed")))
-            if decision.get("action") == "gated":
-                reason = re.sub(r"\d+(\.\d+)?", "N", str(decision.get("reason")))  # one line per kind
-                self.gated[reason] += 1
+            decision = event["decision"]
+            changed, action = bool(decision.get("changed")), decision.get("action")
+            self.adaptations += int(changed)
+            if action == "gated":
+                self.gated[str(decision.get("gate") or "unspecified")] += 1
+            elif action == "hold":
+                self.held[str(decision.get("gate") or "unspecified")] += 1
+        self.events[kind] += 1
 
     def on_hr(self, bpm: float) -> None:
         self.hr = bpm
@@ -116,7 +178,50 @@ def summary(view: SessionView, wall: float, bag: str | None, now: float | None =
         head,
         f"[session] zone {zone}; {in_zone}; {view.adaptations} adaptations in {updates} rule updates; "
         f"{behaviours} behaviours; {view.robot_actions} robot actions",
-        *(f"[session] {n} rule update(s) gated: {reason}" for reason, n in sorted(view.gated.items())),
+        *(f"[session] {n} rule update(s) gated: {label(code)} ({code})"
+          for code, n in sorted(view.gated.items())),
+        *(f"[session] {n} rule update(s) held: {label(code)} ({code})"
+          for code, n in sorted(view.held.items())),
+        *([f"[session] {sum(view.malformed.values())} malformed event message(s) ignored: "
+           + ", ".join(f"{n} {kind}" for kind, n in sorted(view.malformed.items()))]
+          if view.malformed else []),
+        *([f"[session] the coach stopped: another session shared its topics ({view.conflict})"]
+          if view.conflict else []),
         f"[session] heart-rate samples on the coach's input during the session: {view.hr_samples}"
         + (f"; recorded to {bag}" if bag else ""),
+        *(f"[session] {node}: {receiver_text(status)}" for node, status in sorted(view.receivers.items())),
     ])
+
+
+def receiver_text(status: dict) -> str:
+    """A receiver's last status in words: what it received, published, and what went missing."""
+    received, published = status.get("received_samples"), status.get("published_samples")
+    text = f"{received} samples received, {published} published"
+    lost = [f"{status[k]} {k.replace('_', ' ')}" for k in ("gaps", "missing_samples", "rejected_chunks")
+            if status.get(k)]
+    return text + (f" ({', '.join(lost)})" if lost else ", nothing lost")
+
+
+def overdue(view: SessionView, now: float, duration: float, margin: float) -> bool:
+    """The coach should have ended the session by now (sim time): it ran ``margin`` past the routine."""
+    if view.started_at is None or view.ended_at is not None:
+        return False
+    return now - view.started_at > (view.duration if view.duration is not None else duration) + margin
+
+
+def session_counts(view: SessionView) -> dict[str, Any]:
+    """The session's numbers for ``summary.json`` (the same the closing lines say)."""
+    return {
+        "started_at": view.started_at, "ended_at": view.ended_at, "routine_duration": view.duration,
+        "outcome": "finished" if view.ended_at is not None else ("conflict" if view.conflict else
+                                                                 "stopped" if view.started_at is not None
+                                                                 else "not started"),
+        "stop_reason": view.conflict or view.stopped,
+        "zone": None if view.zone is None else {"low": view.zone[0], "high": view.zone[1]},
+        "rule_updates": view.events.get("rule_update", 0), "adaptations": view.adaptations,
+        "behaviours": view.events.get("behaviour", 0), "robot_actions": view.robot_actions,
+        "gated": dict(view.gated), "held": dict(view.held), "malformed_events": dict(view.malformed),
+        "hr_samples": view.hr_samples, "exercise_hr_samples": view.exercise_hr,
+        "exercise_hr_in_zone": view.exercise_in_zone, "events": dict(view.events),
+        "receivers": {node: dict(status) for node, status in view.receivers.items()},
+    }

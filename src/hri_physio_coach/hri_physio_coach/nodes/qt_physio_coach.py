@@ -3,9 +3,12 @@
 A thin shell around :class:`hri_physio_coach.coach.ExerciseCoach`: heart-rate frames in
 (one-sample frames ``[t, bpm]``, std_msgs/Float64MultiArray), robot commands out on
 /QtController/input, replies from /QtController/output, every decision as a JSON event on
-/coach/events and a state snapshot on /coach/state. The session runs on the node's ROS
-clock, so with ``use_sim_time`` it follows /clock and can run many times faster than real
-time. The node exits (status 0) when the session ends, and on SIGINT/SIGTERM.
+/coach/events and a state snapshot on /coach/state (latched). The session runs on the node's
+ROS clock, so with ``use_sim_time`` it follows /clock and can run many times faster than real
+time. The node exits when the session ends (status 0), on SIGINT/SIGTERM or ``stop`` (0), and
+when it finds it is not alone (status 1): a second coach publishing on its events topic (or
+sending robot commands while publishing coach topics), or a second /clock taking turns with
+the first. Every line on /coach/control is handled; unknown words are counted in the state.
 
 Examples::
 
@@ -22,67 +25,34 @@ import json
 import math
 import sys
 import threading
+from collections import Counter
 from typing import Any
 
-import rclpy
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.duration import Duration
-from rclpy.exceptions import ParameterException
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.subscription import MessageInfo
+from rclpy.time_source import CLOCK_TOPIC
+from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray, String
 
 from hri_physio_bridge.frames import FrameFormatError
-from hri_physio_bridge.nodes.common import install_stop_handlers, split_ros_args
-from hri_physio_bridge.qos import frame_qos
+from hri_physio_bridge.node_runner import ManagedNode, run_node
+from hri_physio_bridge.qos import command_qos, event_qos, frame_qos, latched_qos
+from hri_physio_bridge.rate_limit import RateLimitedLog
 from hri_physio_bridge.ros_frames import msg_to_frame
 from hri_physio_coach.coach import CoachError, ExerciseCoach
-from hri_physio_coach.config import (
-    SCALAR_KEYS,
-    CoachConfig,
-    ConfigError,
-    config_from_mapping,
-    read_config_file,
-)
+from hri_physio_coach.config import COACH_NODE, CoachNodeConfig
+from hri_physio_coach.conflicts import SECOND_CLOCK, SECOND_COACH, EchoFilter, SourceWatch
 from hri_physio_coach.paths import default_config_file
-from hri_physio_coach.policies import POLICY_NAMES
 from hri_physio_coach.routine import RoutineError
 
-PROG = "qt_physio_coach"
-NODE_OPTIONS: dict[str, Any] = {
-    "hr_topic": "/physio/polar_h10/hr",
-    "command_topic": "/QtController/input",
-    "reply_topic": "/QtController/output",
-    "events_topic": "/coach/events",
-    "state_topic": "/coach/state",
-    "control_topic": "/coach/control",
-    "interactive": False,
-    "tick_period": 0.1,
-}
+PROG = COACH_NODE
 HR_CHANNELS = ("hr", "bpm", "heart_rate")
 FLAG_CHANNEL = "flag"
+START_WORDS, STOP_WORDS = ("start",), ("stop", "exit")
 # Events worth a line in the ROS log (all of them go to /coach/events).
 _LOGGED = {"session_start", "phase", "activity", "calibration", "zone", "rule_update", "hr_lost",
-           "hr_resumed", "command_failed", "session_end", "session_stopped"}
-
-
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog=PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog="Precedence: defaults < --conf file < command-line options < --ros-args parameters. "
-        "Node parameters: " + ", ".join(f"{k} (default {v!r})" for k, v in NODE_OPTIONS.items())
-        + "; every scalar key of coach.yaml is a parameter too (" + ", ".join(SCALAR_KEYS) + ").",
-    )
-    parser.add_argument("--conf",
-                        help=f"coach YAML file (default: the packaged {default_config_file().name})")
-    parser.add_argument("--interactive", action="store_true", default=None,
-                        help="wait for 'start' on stdin or on the control topic before starting")
-    parser.add_argument("--policy", choices=POLICY_NAMES, default=None, help="adaptation policy")
-    parser.add_argument("--hr-topic", default=None,
-                        help=f"heart-rate frames (default {NODE_OPTIONS['hr_topic']})")
-    return parser
+           "hr_resumed", "command_failed", "session_end", "session_stopped", "conflict"}
 
 
 def hr_samples(msg: Float64MultiArray) -> list[tuple[float, float, bool]]:
@@ -98,48 +68,51 @@ def hr_samples(msg: Float64MultiArray) -> list[tuple[float, float, bool]]:
     return out
 
 
-class QtPhysioCoachNode(Node):
-    """Parameters, topics and the tick timer around an :class:`ExerciseCoach`."""
+def _gid(info: MessageInfo) -> bytes | None:
+    gid = info.get("publisher_gid") if isinstance(info, dict) else None
+    return bytes(gid["data"])[:16] if gid and gid.get("data") is not None else None
 
-    def __init__(self, file_values: dict[str, Any], cli: dict[str, Any], **kwargs: Any) -> None:
+
+class QtPhysioCoachNode(ManagedNode):
+    """Parameters, topics and the tick timer around an :class:`ExerciseCoach`.
+
+    The coach is driven from the executor thread (timer and subscriptions) and, at the end,
+    from :meth:`run` on the main thread: every access holds ``_lock``.
+    """
+
+    def __init__(self, config: CoachNodeConfig, **kwargs: Any) -> None:
         super().__init__(PROG, **kwargs)
-        dynamic = ParameterDescriptor(dynamic_typing=True)
-        opts = {}
-        for key, default in NODE_OPTIONS.items():
-            self.declare_parameter(key, cli.get(key, default), dynamic)
-            opts[key] = self.get_parameter(key).value
-        defaults = CoachConfig().as_dict()
-        values = dict(file_values)
-        for key in SCALAR_KEYS:
-            if key in cli:
-                values[key] = cli[key]
-            self.declare_parameter(key, values.get(key, defaults[key]), dynamic)
-            values[key] = self.get_parameter(key).value
-        self.config = config_from_mapping(values, "configuration")
-        self.opts = opts
-        period = opts["tick_period"]
-        if isinstance(period, bool) or not isinstance(period, int | float) or not period > 0:
-            raise ConfigError(f"tick_period must be > 0 s, got {period!r}")
-        self.interactive = bool(opts["interactive"])
-        self.coach = ExerciseCoach(self.config, self._now, self._send, self._on_event)
-        reliable = QoSProfile(depth=500, reliability=ReliabilityPolicy.RELIABLE)
-        self.commands = self.create_publisher(String, opts["command_topic"], reliable)
-        self.events = self.create_publisher(String, opts["events_topic"], QoSProfile(depth=2000))
-        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.state_pub = self.create_publisher(String, opts["state_topic"], latched)
-        self.create_subscription(Float64MultiArray, opts["hr_topic"], self._on_hr, frame_qos())
-        self.create_subscription(String, opts["reply_topic"], self._on_reply, 200)
-        self.create_subscription(String, opts["control_topic"], self._on_control, 10)
-        self._start_requested = threading.Event()
+        self.config = cfg = self.declare_config(config)
+        self._lock = threading.RLock()
+        self._wake = threading.Event()
+        self._start_requested = False
         self._stop_reason: str | None = None
-        self._state_dirty = False
-        self.create_timer(float(period), self._tick)
+        self._state_dirty = True
+        self.conflict: dict[str, Any] | None = None
+        self.control: Counter[str] = Counter(received=0, unknown=0)
+        self._control_log = RateLimitedLog(self.get_logger().warning)
+        self._own_events = EchoFilter()
+        self._own_commands = EchoFilter()
+        self._clocks = SourceWatch()
+        self._coach_nodes: dict[bytes, str | None] = {}  # command publisher -> its node, if a coach
+        self.coach = ExerciseCoach(cfg, self._now, self._send, self._on_event)
+        self.commands = self.create_publisher(String, cfg.command_topic, command_qos())
+        self.events = self.create_publisher(String, cfg.events_topic, event_qos())
+        self.state_pub = self.create_publisher(String, cfg.state_topic, latched_qos())
+        self.create_subscription(Float64MultiArray, cfg.hr_topic, self._on_hr, frame_qos())
+        self.create_subscription(String, cfg.reply_topic, self._on_reply, command_qos())
+        self.create_subscription(String, cfg.control_topic, self._on_control, command_qos())
+        # Our own topics heard back: anything we did not send there comes from another coach.
+        self.create_subscription(String, cfg.events_topic, self._on_events_heard, event_qos())
+        self.create_subscription(String, cfg.command_topic, self._on_commands_heard, command_qos())
+        if self.get_parameter("use_sim_time").value:
+            clock_qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT)
+            self.create_subscription(Clock, CLOCK_TOPIC, self._on_clock, clock_qos)
+        self.create_timer(cfg.tick_period, self._tick)
         self.get_logger().info(
-            f"participant {self.coach.participant}, policy {self.config.policy}, routine "
-            f"{self.coach.routine.name} ({self.coach.routine.duration / 60:.1f} min), "
-            f"HR from {opts['hr_topic']}"
-            + (": waiting for 'start'" if self.interactive else "")
+            f"participant {self.coach.participant}, policy {cfg.policy}, routine "
+            f"{self.coach.routine.name} ({self.coach.routine.duration / 60:.1f} min), HR from {cfg.hr_topic}"
+            + (": waiting for 'start'" if cfg.interactive else "")
         )
 
     # --- plumbing ----------------------------------------------------------------------------
@@ -147,28 +120,47 @@ class QtPhysioCoachNode(Node):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def _send(self, line: str) -> None:
+        self._own_commands.sent(line)
         self.commands.publish(String(data=line))
 
+    def _publish_event(self, event: dict[str, Any]) -> None:
+        payload = to_json(event)
+        self._own_events.sent(payload)
+        self.events.publish(String(data=payload))
+
     def _on_event(self, event: dict[str, Any]) -> None:
-        self.events.publish(String(data=to_json(event)))
+        self._publish_event(event)
         self._state_dirty = True
         kind = event.get("event")
         if kind in _LOGGED:
             text = _summary(event)
-            if kind in ("command_failed", "hr_lost"):
+            if kind == "conflict":
+                self.get_logger().error(text)
+            elif kind in ("command_failed", "hr_lost"):
                 self.get_logger().warning(text)
             else:
                 self.get_logger().info(text)
 
+    def state(self) -> dict[str, Any]:
+        """The coach's state plus the node's: control lines handled and any conflict found."""
+        return {**self.coach.state(), "control": dict(self.control),
+                "conflict": self.conflict["conflict"] if self.conflict else None}
+
+    def _finish(self) -> None:
+        self.finished = True
+        self._wake.set()
+
+    # --- inputs ------------------------------------------------------------------------------
     def _on_hr(self, msg: Float64MultiArray) -> None:
         try:
             samples = hr_samples(msg)
         except FrameFormatError as exc:
             self.get_logger().warning(f"ignoring a malformed HR frame: {exc}")
             return
-        now = self._now()
-        for source_t, bpm, flagged in samples:
-            self.coach.on_hr(bpm, now=now, flagged=flagged, source_t=source_t)
+        with self._lock:
+            now = self._now()
+            for source_t, bpm, flagged in samples:
+                self.coach.on_hr(bpm, now=now, flagged=flagged, source_t=source_t)
 
     def _on_reply(self, msg: String) -> None:
         try:
@@ -177,42 +169,132 @@ class QtPhysioCoachNode(Node):
             self.get_logger().warning(f"ignoring a reply that is not JSON: {msg.data[:80]!r}")
             return
         if isinstance(reply, dict):
-            self.coach.on_reply(reply)
+            with self._lock:
+                self.coach.on_reply(reply)
 
     def _on_control(self, msg: String) -> None:
         self.request(msg.data)
 
-    def request(self, word: str) -> None:
-        """``start`` or ``stop``/``exit`` from the control topic or stdin."""
-        word = word.strip().lower()
-        if word == "start":
-            self._start_requested.set()
-        elif word in ("stop", "exit"):
-            self._stop_reason = f"{word} requested"
-        elif word:
-            self.get_logger().warning(f"unknown control word {word!r} (start, stop)")
+    def request(self, line: str) -> None:
+        """One control line from the control topic or stdin: ``start``, or ``stop``/``exit``."""
+        word = line.strip().lower()
+        with self._lock:
+            self.control["received"] += 1
+            self._state_dirty = True
+            if word in START_WORDS:
+                self._start_requested = True
+            elif word in STOP_WORDS:
+                self._stop_reason = self._stop_reason or f"{word} requested"
+                self.coach.stop(self._stop_reason)  # nothing to stop before the start
+                self._finish()
+            else:
+                self.control["unknown"] += 1
+                self._control_log.report("unknown", f"unknown control line {line.strip()[:60]!r} "
+                                         f"(known: {', '.join(START_WORDS + STOP_WORDS)})",
+                                         "unknown control line(s)")
 
-    def _tick(self) -> None:
-        now = self._now()
-        if now <= 0.0:
-            return  # sim time without /clock yet
-        if self._stop_reason and not self.coach.finished:
-            self.coach.stop(self._stop_reason)
-        if not self.coach.started and not self.coach.finished:
-            if self.interactive and not self._start_requested.is_set():
+    # --- not alone ---------------------------------------------------------------------------
+    def _on_events_heard(self, msg: String) -> None:
+        if self._own_events.is_foreign(msg.data):
+            self._conflict(SECOND_COACH, self.config.events_topic,
+                           "another publisher on the coach's events topic")
+
+    def _on_commands_heard(self, msg: String, info: MessageInfo) -> None:
+        if not self._own_commands.is_foreign(msg.data):
+            return
+        gid = _gid(info)
+        if gid is None:
+            return
+        if gid not in self._coach_nodes:
+            self._coach_nodes[gid] = self._coach_node_of(gid)
+        node = self._coach_nodes[gid]
+        if node is not None:
+            self._conflict(SECOND_COACH, self.config.command_topic, f"coach node {node} sends robot commands")
+
+    def _coach_node_of(self, gid: bytes) -> str | None:
+        """The name of the node behind a command publisher if it is a coach (None: it is not, or unknown)."""
+        cfg = self.config
+        for info in self.get_publishers_info_by_topic(cfg.command_topic):
+            if bytes(info.endpoint_gid)[:16] != gid:
+                continue
+            name, namespace = info.node_name, info.node_namespace
+            try:
+                topics = {t for t, _ in self.get_publisher_names_and_types_by_node(name, namespace)}
+            except Exception:  # the node is gone (rclpy's NodeNameNonExistentError)
+                return None
+            if name == self.get_name() or topics & {cfg.events_topic, cfg.state_topic}:
+                return f"{namespace.rstrip('/')}/{name}"
+        return None
+
+    def _on_clock(self, _msg: Clock, info: MessageInfo) -> None:
+        gid = _gid(info)
+        if gid is not None and self._clocks.seen(gid):
+            self._conflict(SECOND_CLOCK, CLOCK_TOPIC, "two publishers take turns on the clock")
+
+    def _conflict(self, kind: str, topic: str, what: str) -> None:
+        """Say so (event and error log) and stop: a session mixed with another is worth nothing."""
+        with self._lock:
+            if self.conflict is not None:
                 return
-            self.coach.start(now)
-        self.coach.tick(now)
-        if self._state_dirty:
-            self._state_dirty = False
-            self.state_pub.publish(String(data=to_json(self.coach.state())))
+            me = self.get_fully_qualified_name()
+            others = sorted(f"{i.node_namespace.rstrip('/')}/{i.node_name}"
+                            for i in self.get_publishers_info_by_topic(topic))
+            if me in others:
+                others.remove(me)  # one of them is this node's own publisher (same-named nodes stay)
+            reason = (f"{what} ({topic}; other publishers: {', '.join(others) or 'already gone'}): "
+                      "another session shares this ROS domain; stopping")
+            self.conflict = {"conflict": kind, "topic": topic, "publishers": others, "reason": reason}
+            self._on_event({"t": self._now(), "event": "conflict", "participant": self.coach.participant,
+                            **self.conflict})
+            self.coach.stop(f"conflict: {kind}")
+            self._publish_state()
+            self._finish()
 
-    @property
-    def done(self) -> bool:
-        return self.coach.finished
+    # --- the session -------------------------------------------------------------------------
+    def _tick(self) -> None:
+        with self._lock:
+            now = self._now()
+            coach = self.coach
+            if now > 0.0 and not self.finished:  # sim time without /clock yet: wait
+                if not coach.started and (self._start_requested or not self.config.interactive):
+                    coach.start(now)
+                if coach.started:
+                    coach.tick(now)
+                if coach.finished:
+                    self._finish()
+            if self._state_dirty:
+                self._publish_state()
+
+    def _publish_state(self) -> None:
+        self._state_dirty = False
+        self.state_pub.publish(String(data=to_json(self.state())))
+
+    def on_stop(self, signal_name: str) -> None:
+        self.get_logger().info(f"{signal_name} received: stopping the session")
+        self._stop_reason = self._stop_reason or "signal"
+        self._wake.set()
+
+    def run(self, stop: threading.Event) -> int:
+        if self.config.interactive:
+            threading.Thread(target=_stdin_reader, args=(self,), daemon=True).start()
+        while not self._wake.wait(1.0) and not stop.is_set():
+            pass
+        with self._lock:
+            if self.coach.started and not self.coach.finished:
+                self.coach.stop(self._stop_reason or "signal")
+            self._publish_state()
+            state = self.coach.engine.state
+        self.flush()
+        log = self.get_logger()
+        if self.conflict is not None:
+            log.error(f"stopped: {self.conflict['reason']}")
+            return 1
+        log.info({"finished": "session ended", "idle": "stopped before the session started"}.get(
+            state, "session stopped"))
+        return 0
 
     def flush(self, timeout: float = 2.0) -> None:
-        for pub in (self.commands, self.events):
+        for pub in (self.commands, self.events, self.state_pub):
             pub.wait_for_all_acked(Duration(seconds=timeout))
 
 
@@ -241,6 +323,8 @@ def _summary(event: dict[str, Any]) -> str:
         hr_text = "-" if hr is None else f"{hr:.1f}"
         return (f"[{t:.1f}] rule update: HR {hr_text} -> {d['action']} ({d['reason']}), "
                 f"step {d['index_after']}")
+    if kind == "conflict":
+        return f"[{t:.1f}] conflict ({event['conflict']}): {event['reason']}"
     detail = {k: v for k, v in event.items() if k not in ("t", "event", "participant")}
     return f"[{t:.1f}] {kind}: {to_json(detail)[:200]}"
 
@@ -251,52 +335,13 @@ def _stdin_reader(node: QtPhysioCoachNode) -> None:
         node.request(line)
 
 
-def _cli_values(args: argparse.Namespace) -> dict[str, Any]:
-    cli: dict[str, Any] = {}
-    if args.interactive:
-        cli["interactive"] = True
-    if args.policy:
-        cli["policy"] = args.policy
-    if args.hr_topic:
-        cli["hr_topic"] = args.hr_topic
-    return cli
+def _make_node(config: CoachNodeConfig, _args: argparse.Namespace) -> QtPhysioCoachNode:
+    return QtPhysioCoachNode(config)
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    ours, ros_args = split_ros_args(argv)
-    args = build_parser().parse_args(ours)
-    try:
-        file_values = read_config_file(args.conf or default_config_file(), PROG)
-    except ConfigError as exc:
-        print(f"{PROG}: error: {exc}", file=sys.stderr)
-        return 2
-    rclpy.init(args=[PROG, *ros_args], signal_handler_options=SignalHandlerOptions.NO)
-    node: QtPhysioCoachNode | None = None
-    executor = SingleThreadedExecutor()
-    try:
-        try:
-            node = QtPhysioCoachNode(file_values, _cli_values(args))
-        except (ConfigError, CoachError, RoutineError, ParameterException, ValueError) as exc:
-            print(f"{PROG}: error: {exc}", file=sys.stderr)
-            return 2
-        log = node.get_logger()
-        stop = install_stop_handlers(lambda name: log.info(f"{name} received: stopping the session"))
-        executor.add_node(node)
-        if node.interactive:
-            threading.Thread(target=_stdin_reader, args=(node,), daemon=True).start()
-        while not stop.is_set() and not node.done:
-            executor.spin_once(timeout_sec=0.1)
-        if stop.is_set() and not node.done:
-            node.coach.stop("signal")
-        node.flush()
-        log.info("session ended" if node.coach.engine.state == "finished" else "session stopped")
-        return 0
-    finally:
-        executor.shutdown(timeout_sec=1.0)
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    return run_node(PROG, CoachNodeConfig, _make_node, argv=argv, description=__doc__,
+                    default_conf=default_config_file(), startup_errors=(CoachError, RoutineError))
 
 
 if __name__ == "__main__":

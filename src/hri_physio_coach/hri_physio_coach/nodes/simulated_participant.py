@@ -1,91 +1,82 @@
 """simulated_participant: a person on the exercise step, wearing a (simulated) Polar H10.
 
-Listens to the robot commands on /QtController/input (gesture, gesture speed,
-music tempo), runs the heart-rate model of PARTICIPANT_MODEL.md on ROS time
-(so it follows /clock under use_sim_time), and streams what a Polar H10 would:
-ECG (130 Hz), HR (1 Hz) and RR intervals on LSL, named
-``PolarH10/<device_id>/<ECG|HR|RR>``. Its true model state goes to
-``/participant/state`` (JSON) for evaluation.
+Listens to the robot commands on /QtController/input (gesture, gesture speed, music tempo),
+runs the heart-rate model of PARTICIPANT_MODEL.md on ROS time (so it follows /clock under
+use_sim_time), and streams what a Polar H10 would: ECG (130 Hz), HR (1 Hz) and RR intervals
+on LSL, named ``[<name_prefix>/]PolarH10/<device_id>/<ECG|HR|RR>``. Its true model state goes
+to /participant/state (JSON) for evaluation.
+
+Examples::
+
+    simulated_participant
+    simulated_participant --age 45 --seed 3 --device-id SIM0002
+    simulated_participant --ros-args -p use_sim_time:=true -p age:=45.0
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import sys
+import threading
 from typing import Any
 
 import numpy as np
 import pylsl
-import rclpy
-from rclpy.node import Node
-from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import String
 
 from hri_physio_bridge.frames import Frame
-from hri_physio_bridge.nodes.common import install_stop_handlers, split_ros_args
-from hri_physio_bridge.streamers.base import StreamSpec
+from hri_physio_bridge.node_runner import ManagedNode, run_node
+from hri_physio_bridge.qos import command_qos, event_qos
+from hri_physio_bridge.streamers.base import StreamerError, StreamSpec
 from hri_physio_bridge.streamers.lsl import LslStreamer
 from hri_physio_coach.participant.cardiac import ParticipantSimulator
 from hri_physio_coach.participant.perception import RobotObserver
-from hri_physio_coach.participant.physiology import ParticipantParams
+from hri_physio_coach.participant_config import PARTICIPANT_NODE, ParticipantNodeConfig
 
-PROG = "simulated_participant"
-_PARAM_FIELDS = [f for f in dataclasses.fields(ParticipantParams) if f.type in ("float", "bool")]
+PROG = PARTICIPANT_NODE
 
 
-class SimulatedParticipantNode(Node):
-    def __init__(self, **kwargs: Any) -> None:
+class SimulatedParticipantNode(ManagedNode):
+    """The model on a ROS timer, its strap on LSL outlets, the robot's commands as its input."""
+
+    def __init__(self, config: ParticipantNodeConfig, **kwargs: Any) -> None:
         super().__init__(PROG, **kwargs)
-        defaults = ParticipantParams()
-        for f in _PARAM_FIELDS:
-            self.declare_parameter(f.name, getattr(defaults, f.name))
-        self.declare_parameter("seed", 0)
-        self.declare_parameter("device_id", "SIM0001")
-        self.declare_parameter("name_prefix", "")
-        self.declare_parameter("ecg_rate", 130.0)
-        self.declare_parameter("update_period", 0.1)
-        self.declare_parameter("command_topic", "/QtController/input")
-        values = {f.name: self.get_parameter(f.name).value for f in _PARAM_FIELDS}
-        self.params = ParticipantParams(**values)
-        self.params.validate()
-        period = float(self.get_parameter("update_period").value)
-        if period <= 0:
-            raise ValueError(f"update_period must be > 0 s, got {period}")
-        device = self.get_parameter("device_id").value
-        prefix = self.get_parameter("name_prefix").value
-        prefix = f"{prefix.rstrip('/')}/" if prefix else ""
-        rate = float(self.get_parameter("ecg_rate").value)
-
-        self.seed = int(self.get_parameter("seed").value)
-        self.ecg_rate = rate
+        self.config = cfg = self.declare_config(config)
+        self.params = cfg.params
         # The model starts at the first tick with a valid ROS time: under use_sim_time that is
         # 0 until the first /clock message, and starting then would make the first step jump
         # from 0 to the clock's epoch.
         self.sim: ParticipantSimulator | None = None
         self.lsl_offset = 0.0
         self.observer = RobotObserver()
+        self._lock = threading.Lock()  # ticks (executor thread) and close (main thread)
         self.outlets: dict[str, LslStreamer] = {}
-        for kind, stream_rate, label in (("ECG", rate, "ECG"), ("HR", 1.0, "HR"), ("RR", 0.0, "RR")):
-            s = LslStreamer(f"{prefix}PolarH10/{device}/{kind}")
-            s.open_output(StreamSpec(name=s.name, type=kind, nominal_rate=stream_rate,
-                                     source_id=f"{device}-{kind}", channels=(label,)))
-            self.outlets[kind] = s
-        self.state_pub = self.create_publisher(String, "/participant/state", 10)
-        self.create_subscription(String, self.get_parameter("command_topic").value, self._on_command, 100)
-        self.create_timer(period, self._tick)
+        try:
+            for kind, rate in (("ECG", cfg.ecg_rate), ("HR", 1.0), ("RR", 0.0)):
+                outlet = LslStreamer(cfg.lsl_name(kind))
+                outlet.open_output(StreamSpec(name=outlet.name, type=kind, nominal_rate=rate,
+                                              source_id=f"{cfg.device_id}-{kind}", channels=(kind,)))
+                self.outlets[kind] = outlet
+        except Exception:
+            self.close()
+            raise
+        self.state_pub = self.create_publisher(String, cfg.state_topic, event_qos(100))
+        self.create_subscription(String, cfg.command_topic, self._on_command, command_qos())
+        self.create_timer(cfg.update_period, self._tick)
         self._last_state = 0.0
+        p = self.params
         self.get_logger().info(
-            f"participant (age {self.params.age:g}, HR rest {self.params.hr_rest:g}, HRmax "
-            f"{self.params.hr_max_true:g}) streaming as PolarH10/{device} on LSL"
+            f"participant (age {p.age:g}, HR rest {p.hr_rest:g}, HRmax {p.hr_max_true:g}) streaming as "
+            f"{cfg.lsl_name('*')} on LSL"
         )
 
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 
     def _start_model(self, now: float) -> ParticipantSimulator:
-        self.sim = ParticipantSimulator(self.params, seed=self.seed, ecg_rate=self.ecg_rate, t0=now)
+        cfg = self.config
+        self.sim = ParticipantSimulator(self.params, seed=cfg.seed, ecg_rate=cfg.ecg_rate, t0=now)
         self.sim.set_activity(self.observer.activity)
         # LSL timestamps: model (ROS) time shifted onto the LSL clock at start-up, so in real
         # time they are ordinary LSL timestamps and under /clock they advance with sim time.
@@ -105,57 +96,41 @@ class SimulatedParticipantNode(Node):
             self.outlets[kind].publish(Frame(t + self.lsl_offset, values.reshape(-1, 1)))
 
     def _tick(self) -> None:
-        now = self._now()
-        if now <= 0.0:
-            return  # use_sim_time and no /clock yet
-        sim = self.sim if self.sim is not None else self._start_model(now)
-        if now <= sim.t:
-            return  # sim time paused or went backwards (a replay restarted): wait
-        out = sim.advance(now)
-        self._push("ECG", out.ecg_t, out.ecg_mv)
-        self._push("HR", out.hr_t, out.hr_bpm)
-        self._push("RR", out.rr_t, out.rr_s * 1000.0)
-        if now - self._last_state >= 1.0:
-            self._last_state = now
-            a = sim.activity
-            self.state_pub.publish(String(data=json.dumps({
-                "t": now, "hr_model": sim.hr, "fraction_hrr": sim.kinetics.fraction_hrr,
-                "activity": a.name, "tempo_bpm": a.tempo_bpm, "gesture_speed": a.gesture_speed,
-            })))
+        with self._lock:
+            if not self.outlets:
+                return  # closing
+            now = self._now()
+            if now <= 0.0:
+                return  # use_sim_time and no /clock yet
+            sim = self.sim if self.sim is not None else self._start_model(now)
+            if now <= sim.t:
+                return  # sim time paused or went backwards (a replay restarted): wait
+            out = sim.advance(now)
+            self._push("ECG", out.ecg_t, out.ecg_mv)
+            self._push("HR", out.hr_t, out.hr_bpm)
+            self._push("RR", out.rr_t, out.rr_s * 1000.0)
+            if now - self._last_state >= 1.0:
+                self._last_state = now
+                a = sim.activity
+                self.state_pub.publish(String(data=json.dumps({
+                    "t": now, "hr_model": sim.hr, "fraction_hrr": sim.kinetics.fraction_hrr,
+                    "activity": a.name, "tempo_bpm": a.tempo_bpm, "gesture_speed": a.gesture_speed,
+                })))
 
     def close(self) -> None:
-        for s in self.outlets.values():
-            s.close()
+        with self._lock:
+            outlets, self.outlets = self.outlets, {}
+        for outlet in outlets.values():
+            outlet.close()
+
+
+def _make_node(config: ParticipantNodeConfig, _args: argparse.Namespace) -> SimulatedParticipantNode:
+    return SimulatedParticipantNode(config)
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    ours, ros_args = split_ros_args(argv)
-    parser = argparse.ArgumentParser(
-        prog=PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog="Participant parameters are ROS parameters: " + ", ".join(f.name for f in _PARAM_FIELDS)
-        + ", seed, device_id, name_prefix, ecg_rate, update_period, command_topic "
-        "(e.g. --ros-args -p age:=45.0 -p use_sim_time:=true).",
-    )
-    parser.parse_args(ours)
-    rclpy.init(args=[PROG, *ros_args], signal_handler_options=SignalHandlerOptions.NO)
-    node: SimulatedParticipantNode | None = None
-    try:
-        try:
-            node = SimulatedParticipantNode()
-        except (ValueError, TypeError) as exc:
-            print(f"{PROG}: error: {exc}", file=sys.stderr)
-            return 2
-        stop = install_stop_handlers(lambda name: None)
-        while not stop.is_set() and rclpy.ok():
-            rclpy.spin_once(node, timeout_sec=0.1)
-        node.get_logger().info("stopping")
-        return 0
-    finally:
-        if node is not None:
-            node.close()
-            node.destroy_node()
-        rclpy.try_shutdown()
+    return run_node(PROG, ParticipantNodeConfig, _make_node, argv=argv, description=__doc__,
+                    startup_errors=(StreamerError,))
 
 
 if __name__ == "__main__":

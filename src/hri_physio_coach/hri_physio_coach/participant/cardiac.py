@@ -13,6 +13,7 @@ at 1 Hz. Time is advanced explicitly by the caller.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -66,13 +67,22 @@ class SimulatorOutput:
 
 
 class ParticipantSimulator:
+    """The participant's heart, beats and strap on an explicitly advanced clock.
+
+    ``ecg=False`` leaves the ECG out (evaluations only need the strap's HR and RR). The ECG
+    noise has its own random stream, so the beats, RR and HR of a seed are the same with or
+    without ECG and however the time is cut into :meth:`advance` calls.
+    """
+
     def __init__(self, params: ParticipantParams, seed: int = 0, ecg_rate: float = 130.0,
-                 dt: float = 0.1, t0: float = 0.0, noise_mv: float = 0.01) -> None:
+                 dt: float = 0.1, t0: float = 0.0, noise_mv: float = 0.01, ecg: bool = True) -> None:
         if ecg_rate <= 0:
             raise ValueError(f"ecg_rate must be > 0, got {ecg_rate}")
         self.p = params
         self.kinetics = HeartRateKinetics(params, dt)
         self.rng = np.random.default_rng(seed)
+        self._ecg_rng = np.random.default_rng([seed, 0xEC6])
+        self.ecg = ecg
         self.ecg_rate = ecg_rate
         self.noise_mv = noise_mv
         self.t0 = t0
@@ -87,7 +97,7 @@ class ParticipantSimulator:
         self._lf_phase = float(self.rng.uniform(0, TWO_PI))
         self._hf_phase = float(self.rng.uniform(0, TWO_PI))
         self._pending_rr = 0.0  # a missed beat carries its interval into the next report
-        self._recent_rr: list[tuple[float, float]] = []
+        self._recent_rr: deque[tuple[float, float]] = deque()
 
     @property
     def t(self) -> float:
@@ -119,32 +129,54 @@ class ParticipantSimulator:
         intervals: list[tuple[float, float]] = [self._interval]
         rr_t: list[float] = []
         rr_s: list[float] = []
-        hr_t: list[float] = []
-        hr_v: list[float] = []
+        reports: list[tuple[float, float, float]] = []
         model_hr: list[tuple[float, float]] = []
-        dt = self.kinetics.dt
-        while self.t0 + (self._steps + 1) * dt <= t_end + 1e-9:
-            hr = self.kinetics.step()
+        self._run(t_end, reports, rr_t, rr_s, beats, intervals, model_hr)
+        if self.ecg:
+            ecg_t, ecg_v = self._ecg_until(self.t, intervals)
+        else:
+            ecg_t = ecg_v = np.empty(0)
+        return SimulatorOutput(ecg_t, ecg_v, np.array(beats), np.array(rr_t), np.array(rr_s),
+                               np.array([r[0] for r in reports]), np.array([r[1] for r in reports]), model_hr)
+
+    def advance_hr(self, t_end: float) -> list[tuple[float, float, float]]:
+        """The same run as :meth:`advance`, keeping only the 1 Hz reports: (time, strap bpm, model bpm).
+
+        For evaluations that need the heart rate alone (no arrays, no ECG: a fraction of the cost).
+        """
+        reports: list[tuple[float, float, float]] = []
+        self._run(t_end, reports, [], [])
+        return reports
+
+    def _run(self, t_end: float, reports: list[tuple[float, float, float]], rr_t: list[float],
+             rr_s: list[float], beats: list[float] | None = None,
+             intervals: list[tuple[float, float]] | None = None,
+             model_hr: list[tuple[float, float]] | None = None) -> None:
+        """Step the model to ``t_end``, appending what became due to the given lists."""
+        dt, t0, step = self.kinetics.dt, self.t0, self.kinetics.step
+        limit = t_end + 1e-9
+        while t0 + (self._steps + 1) * dt <= limit:
+            hr = step()
             self._steps += 1
-            model_hr.append((self.t, hr))
-            while self._next_beat <= self.t:
+            now = t0 + self._steps * dt
+            if model_hr is not None:
+                model_hr.append((now, hr))
+            while self._next_beat <= now:
                 beat = self._next_beat
-                beats.append(beat)
+                if beats is not None:
+                    beats.append(beat)
                 if self._have_beat:
                     self._report_rr(beat, beat - self._interval[0], rr_t, rr_s)
                 self._have_beat = True
                 rr = self._next_rr(hr, 60.0 / hr)
                 self._next_beat = beat + rr
                 self._interval = (beat, rr)
-                intervals.append(self._interval)
-            while self.t0 + self._hr_second <= self.t:
-                when = self.t0 + self._hr_second
-                hr_t.append(when)
-                hr_v.append(self._reported_hr(when, hr))
+                if intervals is not None:
+                    intervals.append(self._interval)
+            while t0 + self._hr_second <= now:
+                when = t0 + self._hr_second
+                reports.append((when, self._reported_hr(when, hr), hr))
                 self._hr_second += 1
-        ecg_t, ecg_v = self._ecg_until(self.t, intervals)
-        return SimulatorOutput(ecg_t, ecg_v, np.array(beats), np.array(rr_t), np.array(rr_s),
-                               np.array(hr_t), np.array(hr_v), model_hr)
 
     def _report_rr(self, when: float, rr: float, rr_t: list[float], rr_s: list[float]) -> None:
         """What the strap reports: mostly the true interval, sometimes a missed or extra beat."""
@@ -160,11 +192,12 @@ class ParticipantSimulator:
             rr_t.append(when)
             rr_s.append(r)
             self._recent_rr.append((when, r))
-        self._recent_rr = [(w, r) for w, r in self._recent_rr if w > when - 5.0]
+        while self._recent_rr and self._recent_rr[0][0] <= when - 5.0:
+            self._recent_rr.popleft()
 
     def _reported_hr(self, when: float, model_hr: float) -> float:
         recent = [r for w, r in self._recent_rr if w > when - 3.0]
-        return 60.0 / float(np.mean(recent)) if recent else model_hr
+        return 60.0 * len(recent) / math.fsum(recent) if recent else model_hr
 
     def _ecg_until(self, t_end: float, intervals: list[tuple[float, float]]) -> tuple[np.ndarray, np.ndarray]:
         last = math.floor((t_end - self.t0) * self.ecg_rate + 1e-9)
@@ -180,5 +213,5 @@ class ParticipantSimulator:
             out[mask] = ecg_waveform(t[mask], start, rr)
         x = self.kinetics.fraction_hrr
         out += 0.05 * np.sin(TWO_PI * breathing_rate(x) * t)  # respiratory baseline wander
-        out += self.rng.normal(0.0, self.noise_mv, size=t.shape)
+        out += self._ecg_rng.normal(0.0, self.noise_mv, size=t.shape)
         return t, out

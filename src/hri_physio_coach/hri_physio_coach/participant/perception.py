@@ -4,21 +4,11 @@ and the music tempo (the coach plays one audio file per tempo, named with its BP
 
 from __future__ import annotations
 
-import re
-from pathlib import PurePath
-
+from hri_physio_coach.media_names import tempo_from_name as tempo_from_audio
 from hri_physio_coach.participant.physiology import MARCHING, SEATED, STEPPING, Activity
 from qt_controller.commands import ParseError, SetAudio, SetGesture, parse_command
 
-_BPM = re.compile(r"(\d{2,3})")
 KNOWN_ACTIVITIES = MARCHING | STEPPING | SEATED
-
-
-def tempo_from_audio(file: str) -> float | None:
-    """Music tempo from an audio file name such as ``music_125.wav`` (None if it names none)."""
-    numbers = [float(n) for n in _BPM.findall(PurePath(file).stem)]
-    plausible = [n for n in numbers if 60.0 <= n <= 220.0]
-    return plausible[-1] if plausible else None
 
 
 class RobotObserver:

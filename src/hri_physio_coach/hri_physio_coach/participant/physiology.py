@@ -159,16 +159,19 @@ class HeartRateKinetics:
 
     def step(self) -> float:
         """Advance by dt; returns the heart rate (bpm) at the end of the step."""
-        p, dt, u = self.p, self.dt, self.u
-        self._delay.append(u)
-        u_delayed = self._delay.popleft()
+        p, dt, u, delay = self.p, self.dt, self.u, self._delay
+        delay.append(u)
+        u_delayed = delay.popleft()
         self.x_fast += dt * (0.35 * u - self.x_fast) / p.tau_fast
         target = 0.65 * u_delayed
         tau = p.tau_on if target > self.x_slow else p.tau_off
         self.x_slow += dt * (target - self.x_slow) / tau
         drive = p.drift_amplitude * max(0.0, (u - 0.3) / 0.4)
         self.x_drift += dt * (drive - self.x_drift) / p.tau_drift
-        return self.hr
+        hr = p.hr_rest + (self.x_fast + self.x_slow + self.x_drift) * (p.hr_max_true - p.hr_rest)
+        if self.seated:
+            hr += p.calibration_offset
+        return min(hr, p.hr_max_true)  # = self.hr, spelled out: this runs ten times a model second
 
 
 def breathing_rate(fraction_hrr: float) -> float:

@@ -1,0 +1,131 @@
+"""One session, discrete-event: the nodes' coach and participant model on one injected clock.
+
+The closed loop runs ``qt_physio_coach`` (an :class:`~hri_physio_coach.coach.ExerciseCoach`)
+and ``simulated_participant`` (a :class:`~hri_physio_coach.participant.cardiac.ParticipantSimulator`
+that follows the robot's command lines through a
+:class:`~hri_physio_coach.participant.perception.RobotObserver`), joined by ROS 2 and LSL.
+Here the same three objects are joined directly: every command line the coach sends goes to
+the observer, every 1 Hz heart rate the strap reports reaches the coach ``hr_latency``
+seconds later, and time jumps from one due thing (a coach timer, a heart-rate sample) to the
+next. No second implementation: only the transport is left out.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+from functools import lru_cache
+from typing import Any
+
+import numpy as np
+
+from hri_physio_coach.coach import ExerciseCoach, load_coach_routine
+from hri_physio_coach.config import CoachConfig
+from hri_physio_coach.participant.cardiac import ParticipantSimulator
+from hri_physio_coach.participant.perception import RobotObserver
+from hri_physio_coach.participant.physiology import ParticipantParams
+from hri_physio_coach.routine import Routine
+
+#: Heart-rate samples travel strap -> LSL -> receiver -> coach; this is their delay (s) here.
+DEFAULT_HR_LATENCY = 0.1
+
+
+@dataclass(frozen=True)
+class SessionSpec:
+    """One participant under one policy: everything that decides the session's outcome."""
+
+    policy: str
+    participant: int  # index in the cohort
+    params: ParticipantParams
+    participant_seed: int  # the participant's noise (RR variability, strap artefacts)
+    coach_seed: int  # the coach's draws (fuzzy rule, behaviours)
+    variant: str = "main"  # sensitivity variant the params come from
+    hr_latency: float = DEFAULT_HR_LATENCY
+    coach_options: tuple[tuple[str, Any], ...] = ()  # extra coach options, e.g. (("speed_idx", 2),)
+
+
+@dataclass
+class SessionRun:
+    """What happened: the coach's events and decisions, and per-second traces."""
+
+    spec: SessionSpec
+    events: list[dict[str, Any]]
+    decisions: list[dict[str, Any]]
+    t: np.ndarray  # s, the strap's 1 Hz heart-rate times
+    hr: np.ndarray  # bpm, the strap's heart rate (what the coach receives)
+    model_hr: np.ndarray  # bpm, the model's true heart rate at the same times
+    ladder: np.ndarray  # ladder index at those times
+    mets: np.ndarray  # cost of the activity performed at those times (nan: seated or unstated)
+    activity: list[str] = field(default_factory=list)  # the gesture performed at those times
+
+    def of(self, kind: str) -> list[dict[str, Any]]:
+        return [e for e in self.events if e.get("event") == kind]
+
+
+@lru_cache(maxsize=8)
+def _routine(routine_file: str, calib_time: float, video_time: float, rule_period: float,
+             behaviour_period: float) -> Routine:
+    cfg = CoachConfig(routine_file=routine_file, calib_time=calib_time, video_time=video_time,
+                      rule_period=rule_period, behaviour_period=behaviour_period)
+    return load_coach_routine(cfg)
+
+
+def session_routine(cfg: CoachConfig) -> Routine:
+    """The coach's routine, loaded once per process (it is the same file for every session)."""
+    return _routine(cfg.routine_file, cfg.calib_time, cfg.video_time, cfg.rule_period, cfg.behaviour_period)
+
+
+def coach_config(spec: SessionSpec, base: CoachConfig | None = None) -> CoachConfig:
+    """The coach's options for a session: the base (default: the packaged defaults) for this person."""
+    values = {**(base.as_dict() if base is not None else {}), **dict(spec.coach_options),
+              "policy": spec.policy, "seed": spec.coach_seed, "part_age": float(spec.params.age)}
+    return CoachConfig.from_mapping(values, f"session {spec.policy}/{spec.participant}")
+
+
+def simulate_session(spec: SessionSpec, base: CoachConfig | None = None) -> SessionRun:
+    """Run one whole session; returns its events, decisions and per-second traces."""
+    cfg = coach_config(spec, base)
+    routine = session_routine(cfg)
+    sim = ParticipantSimulator(spec.params, seed=spec.participant_seed, ecg=False)
+    observer = RobotObserver()
+    clock = [0.0]
+
+    def send(line: str) -> None:
+        if observer.observe(line):
+            sim.set_activity(observer.activity)
+
+    events: list[dict[str, Any]] = []
+    coach = ExerciseCoach(cfg, lambda: clock[0], send, events.append, routine=routine)
+    coach.start(0.0)
+    latency = spec.hr_latency
+    arrivals: deque[tuple[float, float, float, float]] = deque()  # (arrival, source time, bpm, model bpm)
+    ts: list[float] = []
+    hrs: list[float] = []
+    model: list[float] = []
+    ladder: list[int] = []
+    mets: list[float] = []
+    acts: list[str] = []
+    next_sample = 1.0  # the strap reports HR every whole second of model time
+    while not coach.finished:
+        due = coach.engine.next_due()
+        now = next_sample + latency if due is None else min(due, next_sample + latency)
+        for t_hr, bpm, true_bpm in sim.advance_hr(now):
+            arrivals.append((t_hr + latency, t_hr, bpm, true_bpm))
+            next_sample = t_hr + 1.0
+        clock[0] = now
+        while arrivals and arrivals[0][0] <= now + 1e-9:
+            arrival, source, bpm, true_bpm = arrivals.popleft()
+            coach.on_hr(bpm, now=arrival, source_t=source)
+            ts.append(source)
+            hrs.append(bpm)
+            model.append(true_bpm)
+            ladder.append(coach.ladder.index)
+            doing = coach.choice.current
+            mets.append(doing.mets if doing is not None and doing.mets is not None else np.nan)
+            acts.append(observer.activity.name)
+        coach.tick(now)
+    return SessionRun(
+        spec=spec, events=events, decisions=[d.as_dict() for d in coach.decisions],
+        t=np.array(ts), hr=np.array(hrs), model_hr=np.array(model), ladder=np.array(ladder),
+        mets=np.array(mets), activity=acts,
+    )

@@ -1,0 +1,155 @@
+"""From per-session rows to the per-policy summary, the paired comparisons and the sensitivity table.
+
+* ``in_zone_*``: fraction (0-1) of conditioning time with the 5-s smoothed heart rate in the
+  coach's zone; the CI is a percentile bootstrap (95 %) of the median, seeded.
+* ``in_zone_mean_reachable``: the mean over the people whose zone the policy's controls can
+  reach (:mod:`~hri_physio_coach.evaluate.reach`); ``unreachable_share`` is the rest.
+* Paired comparisons: every policy against a reference on the same people; Wilcoxon
+  signed-rank test (scipy, two-sided) on the per-person differences.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+SUMMARY_COLUMNS = (
+    "policy", "n", "in_zone_median", "in_zone_mean", "in_zone_ci_low", "in_zone_ci_high",
+    "in_zone_mean_reachable", "above_hrr70_s_median", "adaptations_per_10min_median",
+    "cooldown_end_frac_hrr_median", "unreachable_share",
+)
+REFERENCES = ("threshold", "fuzzy")
+
+
+def median_ci(values: np.ndarray, seed: int, resamples: int = 2000) -> tuple[float, float]:
+    """95 % percentile-bootstrap interval of the median."""
+    values = values[np.isfinite(values)]
+    if len(values) < 2 or np.all(values == values[0]):
+        v = float(values[0]) if len(values) else math.nan
+        return v, v
+    res = stats.bootstrap((values,), np.median, confidence_level=0.95, n_resamples=resamples,
+                          method="percentile", random_state=np.random.default_rng(seed))
+    return float(res.confidence_interval.low), float(res.confidence_interval.high)
+
+
+def summarise(sessions: pd.DataFrame, seed: int, policies: Sequence[str] | None = None,
+              resamples: int = 2000) -> pd.DataFrame:
+    """One row per policy (in the order given), columns :data:`SUMMARY_COLUMNS`."""
+    rows = []
+    for policy in policies or list(dict.fromkeys(sessions["policy"])):
+        s = sessions[sessions["policy"] == policy]
+        x = s["in_zone"].to_numpy(dtype=float)
+        low, high = median_ci(x, seed, resamples)
+        reachable = s[s["reachable"].astype(bool)]
+        rows.append({
+            "policy": policy, "n": len(s), "in_zone_median": float(np.nanmedian(x)),
+            "in_zone_mean": float(np.nanmean(x)), "in_zone_ci_low": low, "in_zone_ci_high": high,
+            "in_zone_mean_reachable": float(reachable["in_zone"].mean()) if len(reachable) else math.nan,
+            "above_hrr70_s_median": float(s["above_hrr70_s"].median()),
+            "adaptations_per_10min_median": float(s["adaptations_per_10min"].median()),
+            "cooldown_end_frac_hrr_median": float(s["cooldown_end_frac_hrr"].median()),
+            "unreachable_share": float(1.0 - s["reachable"].astype(bool).mean()),
+        })
+    return pd.DataFrame(rows, columns=list(SUMMARY_COLUMNS))
+
+
+def paired(sessions: pd.DataFrame, policy: str, reference: str, metric: str = "in_zone") -> dict[str, Any]:
+    """``policy`` minus ``reference`` on the same people: median and mean difference, Wilcoxon p."""
+    a = sessions[sessions["policy"] == policy].set_index("participant")[metric]
+    b = sessions[sessions["policy"] == reference].set_index("participant")[metric]
+    both = a.index.intersection(b.index)
+    diff = (a.loc[both] - b.loc[both]).to_numpy(dtype=float)
+    diff = diff[np.isfinite(diff)]
+    p = math.nan
+    if len(diff) and np.any(diff != 0):
+        p = float(stats.wilcoxon(diff).pvalue)
+    return {"policy": policy, "reference": reference, "n": len(diff),
+            "median_diff": float(np.median(diff)) if len(diff) else math.nan,
+            "mean_diff": float(np.mean(diff)) if len(diff) else math.nan,
+            "better": int(np.sum(diff > 0)), "worse": int(np.sum(diff < 0)), "p": p}
+
+
+def comparisons(sessions: pd.DataFrame, references: Sequence[str] = REFERENCES) -> pd.DataFrame:
+    present = list(dict.fromkeys(sessions["policy"]))
+    rows = [paired(sessions, policy, ref) for ref in references if ref in present
+            for policy in present if policy != ref]
+    return pd.DataFrame(rows, columns=["policy", "reference", "n", "median_diff", "mean_diff", "better",
+                                       "worse", "p"])
+
+
+def winner(summary: pd.DataFrame) -> str:
+    """The policy with the most conditioning time in zone (mean; median breaks ties)."""
+    best = summary.sort_values(["in_zone_mean", "in_zone_median"], ascending=False)
+    return str(best.iloc[0]["policy"])
+
+
+def sensitivity(sessions: pd.DataFrame, best: str, policies: Sequence[str]) -> pd.DataFrame:
+    """Per model variant: each policy's in-zone median and mean, and whether ``best`` still wins."""
+    rows = []
+    for variant, s in sessions.groupby("variant", sort=False):
+        row: dict[str, Any] = {"variant": variant}
+        for policy in policies:
+            x = s[s["policy"] == policy]["in_zone"]
+            row[f"{policy}_median"] = float(x.median()) if len(x) else math.nan
+            row[f"{policy}_mean"] = float(x.mean()) if len(x) else math.nan
+        others = [p for p in policies if p != best and p in set(s["policy"])]
+        ps = {ref: paired(s, best, ref) for ref in others}
+        row["winner_still_best"] = all(c["mean_diff"] > 0 and c["p"] < 0.01 for c in ps.values())
+        for ref, c in ps.items():
+            row[f"p_vs_{ref}"] = c["p"]
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+# --- markdown -------------------------------------------------------------------------------------
+def _cell(value: Any) -> str:
+    if isinstance(value, bool | np.bool_):
+        return "yes" if value else "no"
+    if isinstance(value, float | np.floating):
+        if not math.isfinite(value):
+            return "-"
+        return f"{value:.3g}" if abs(value) < 1e-3 and value != 0 else f"{value:.3f}".rstrip("0").rstrip(".")
+    return str(value)
+
+
+def markdown_table(df: pd.DataFrame, p_columns: Sequence[str] = ()) -> str:
+    """A GitHub markdown table (p-values in scientific notation)."""
+    head = "| " + " | ".join(map(str, df.columns)) + " |"
+    rule = "|" + "|".join("---" for _ in df.columns) + "|"
+    lines = [head, rule]
+    for _, r in df.iterrows():
+        cells = [(f"{r[c]:.2g}" if c in p_columns and isinstance(r[c], float) and math.isfinite(r[c])
+                  else _cell(r[c])) for c in df.columns]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def summary_markdown(summary: pd.DataFrame, comps: pd.DataFrame, sens: pd.DataFrame | None,
+                     command: str, cohort: int, seed: int, plots: Sequence[str]) -> str:
+    parts = [
+        f"# Policy evaluation: {cohort} simulated people, seed {seed}",
+        "",
+        f"Command: `{command}`",
+        "",
+        "In-zone = fraction of conditioning time with the 5-s smoothed heart rate inside the coach's zone "
+        "(HRR40-HRR70 of its calibrated rest and age-predicted maximum). CI: bootstrap 95 % of the median. "
+        "`in_zone_mean_reachable`: mean over the people whose zone the policy's controls can reach in the "
+        "model; `unreachable_share`: the others.",
+        "",
+        markdown_table(summary),
+        "",
+        "## Paired differences (same people, policy minus reference; Wilcoxon signed-rank, two-sided)",
+        "",
+        markdown_table(comps, p_columns=("p",)) if len(comps) else "(no reference policy in this run)",
+    ]
+    if sens is not None and len(sens):
+        parts += ["", "## Sensitivity: each assumed model parameter at an end of its range, for everyone", "",
+                  markdown_table(sens, p_columns=[c for c in sens.columns if c.startswith("p_vs_")])]
+    if plots:
+        parts += ["", "## Plots", ""] + [f"![{name}]({name})" for name in plots]
+    return "\n".join(parts) + "\n"
