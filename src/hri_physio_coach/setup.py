@@ -27,6 +27,7 @@ setup(
             "simulated_participant = hri_physio_coach.nodes.simulated_participant:main",
             "hri_physio_session = hri_physio_coach.session:main",
             "hri_physio_report = hri_physio_coach.report.cli:main",
+            "hri_physio_evaluate = hri_physio_coach.evaluate.cli:main",
         ],
     },
 )
