@@ -121,12 +121,14 @@ class Subscriber:
         rclpy.shutdown(context=self.context)
 
 
-def start_forwarder(kind: str, name: str, topic: str, frame: int, channels: int) -> subprocess.Popen:
+def start_forwarder(kind: str, name: str, topic: str, frame: int, channels: int,
+                    rate: float) -> subprocess.Popen:
     env = dict(os.environ)
     if kind == "receiver":
         cmd = [
             str(Path(sys.prefix) / "bin" / "physio_receiver"), "--input", f"lsl:{name}",
             "--output", f"ros:{topic}", "--num-channels", str(channels), "--output-frame", str(frame),
+            "--sampling-rate", f"{rate:g}",  # the stream's declared rate: another one is refused
             "--input-frame", "4096", "--buffer-length", "200000", "--wait-for-consumers", "30",
             "--status-period", "3600",
         ]
@@ -174,7 +176,7 @@ def run(kind: str, channels: int, rate: float, frame: int, chunk: int, seconds: 
     outlet = pylsl.StreamOutlet(pylsl.StreamInfo(name, "ECG", channels, rate, pylsl.cf_double64, name),
                                 chunk_size=0, max_buffered=600)
     sub = Subscriber(topic)
-    proc = start_forwarder(kind, name, topic, frame, channels)
+    proc = start_forwarder(kind, name, topic, frame, channels, rate)
     ps = psutil.Process(proc.pid)
     try:
         if not wait_for(lambda: outlet.have_consumers() and sub.node.count_publishers(topic) > 0, 60):

@@ -83,7 +83,7 @@ class Stream:
 
 
 STATUS_RE = re.compile(
-    r"^\[INFO\] \[(\d+\.\d+)\] \[recorder\]: .*?; (\d+) messages, ([\d.]+) MB payload", re.M
+    r"^\[INFO\] \[(\d+\.\d+)\] \[(?:physio_)?recorder\]: .*?; (\d+) messages, ([\d.]+) MB payload", re.M
 )
 
 
@@ -163,7 +163,7 @@ def run_recorder(
         argv = [sys.executable, str(Path(__file__).with_name("minimal_recorder.py")), topic, stream.msg_type,
                 str(bag), status_period, baseline]
     else:
-        argv = [str(Path(sys.prefix) / "bin" / "recorder"), topic, "-o", str(bag),
+        argv = [str(Path(sys.prefix) / "bin" / "physio_recorder"), topic, "-o", str(bag),
                 "--discovery-period", "0.2", "--status-period", status_period]
     rec = subprocess.Popen(
         argv,

@@ -25,7 +25,7 @@ from helpers import NodeProcess, RosFrameCollector, concat_new_samples, wait_unt
 from hri_physio_bridge.frames import Frame
 from hri_physio_bridge.ros_frames import msg_to_frame
 
-pytestmark = [pytest.mark.ros, pytest.mark.lsl]
+pytestmark = [pytest.mark.integration, pytest.mark.ros, pytest.mark.lsl]
 RATE = 130.0
 SECONDS = 3
 

@@ -20,7 +20,7 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 from helpers import NodeProcess, wait_until
 from hri_physio_bridge.bag.recovery import McapScanner
 
-pytestmark = [pytest.mark.ros]
+pytestmark = [pytest.mark.integration, pytest.mark.ros]
 
 
 @pytest.fixture
@@ -120,16 +120,34 @@ def test_refuses_to_overwrite_and_bad_arguments(tmp_path: Path) -> None:
     for args, text in (
         (["--regex", "("], "regular expression"),
         (["--session-id", "a b"], "session id"),
-        (["--flush-period", "0"], "must be > 0"),
-        (["--poll-period", "-1"], "must be > 0"),
+        (["--flush-period", "0"], "flush_period"),
+        (["--poll-period", "-1"], "poll_period"),
         (["--repair", str(tmp_path / "x")], "does not exist"),
     ):
         r = subprocess.run(
             [exe, "-o", str(tmp_path / "new"), *args], capture_output=True, text=True, timeout=60
         )
         assert r.returncode != 0 and text in r.stderr and "Traceback" not in r.stderr, (args, r.stderr)
+    for args, text in (
+        (["--qos-depth", "0"], "qos_depth"),
+        (["--compression", "lz4"], "--compression"),
+        (["--ros-args", "-p", "qos_depth:=abc"], "qos_depth"),
+        (["--ros-args", "-p", "compression:=lz4"], "compression"),
+        (["--ros-args", "-p", "session_id:=Jane Doe"], "session_id"),
+        (["--ros-args", "-p", "colour:=red"], "colour"),
+        (["--ros-args", "--params-file", str(tmp_path / "missing.yaml")], "missing.yaml"),
+    ):
+        r = subprocess.run([exe, "-o", str(tmp_path / "never"), *args], capture_output=True, text=True,
+                           timeout=60)
+        lines = r.stderr.strip().splitlines()
+        assert r.returncode == 2 and "Traceback" not in r.stderr and text in lines[-1], (args, r.stderr)
+        assert lines[-1].startswith("recorder: error:"), (args, r.stderr)
+    assert not (tmp_path / "never").exists()  # nothing is created before the options are right
     r = subprocess.run([exe, "--help"], capture_output=True, text=True, timeout=60)
     assert r.returncode == 0 and "--flush-period" in r.stdout and "--poll-period" in r.stdout
+    r = subprocess.run([str(Path(sys.prefix) / "bin" / "physio_recorder"), "--session-id", "a b"],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and r.stderr.startswith("physio_recorder: error:") and "session" in r.stderr
 
 
 def test_stamps_are_arrival_times_not_take_times(tmp_path: Path, prefix: str, node) -> None:

@@ -162,3 +162,93 @@ def test_header_only_bag_reads_as_empty(tmp_path: Path) -> None:
     copy = tmp_path / "h.mcap"
     shutil.copy(writer.path, copy)
     assert BagReader(copy).message_count == 0
+
+
+# -- a complete bag with bytes flipped in the middle -----------------------------------------------
+
+
+def _complete_bag(path: Path, n: int = 1000) -> BagWriter:
+    """A finished bag of ``n`` messages in chunks of about 30 (chunk size 4 KiB)."""
+    writer = BagWriter(path, chunk_size=4096)
+    writer.add_topic("/count", TN, message_definition(TN), installed_type_hash(TN) or "", [default_qos()])
+    for i in range(n):
+        writer.write("/count", T0 + i * 10_000_000, serialize(String(data=f"{i:05d} " + "x" * 80)))
+    writer.close()
+    return writer
+
+
+def _flip(path: Path, start: int, n: int) -> None:
+    data = bytearray(path.read_bytes())
+    for i in range(start, start + n):
+        data[i] ^= 0xFF
+    path.write_bytes(bytes(data))
+
+
+def _chunk_spans(data: bytes) -> list[tuple[int, int, list[int]]]:
+    """(first byte, end byte, message values) of every chunk of an intact file, via the mcap library."""
+    import io
+
+    from mcap.data_stream import ReadDataStream
+    from mcap.reader import SeekingReader
+    from mcap.records import Chunk, Message
+    from mcap.stream_reader import breakup_chunk
+    from rclpy.serialization import deserialize_message
+
+    spans = []
+    for index in SeekingReader(io.BytesIO(data)).get_summary().chunk_indexes:
+        start, end = index.chunk_start_offset, index.chunk_start_offset + index.chunk_length
+        records = breakup_chunk(Chunk.read(ReadDataStream(io.BytesIO(data[start + 9:end]))))
+        values = [int(deserialize_message(r.data, String).data.split()[0]) for r in records
+                  if isinstance(r, Message)]
+        spans.append((start, end, values))
+    return sorted(spans)
+
+
+@pytest.mark.parametrize("where", [0.5, 0.3, 0.8])
+def test_flipped_bytes_in_a_complete_bag_are_found_by_chunk_crc(tmp_path: Path, where: float) -> None:
+    """400 bytes flipped mid-file: the summary still reads as complete (that is all --info
+    looked at); the chunk CRCs say which chunks are damaged and how many messages they hold."""
+    from hri_physio_bridge.bag.integrity import check_chunks
+
+    writer = _complete_bag(tmp_path / "b")
+    spans = _chunk_spans(writer.path.read_bytes())
+    start = int(writer.path.stat().st_size * where)
+    _flip(writer.path, start, 400)
+    hit = [(s, values) for s, e, values in spans if s < start + 400 and e > start]
+    assert hit, "the flipped bytes must hit a chunk for this test to mean anything"
+
+    reader = BagReader(writer.path.parent)
+    assert reader.complete and reader.message_count == 1000  # the summary alone sees nothing
+    check = check_chunks(writer.path)
+    assert [c.offset for c in check.damaged] == [s for s, _ in hit]
+    assert check.unreadable_messages == sum(len(v) for _, v in hit)
+    assert [c.messages for c in check.damaged] == [len(v) for _, v in hit]
+    assert [c.offset for _p, c in reader.damaged_chunks()] == [s for s, _ in hit]
+    assert reader.unreadable_messages == check.unreadable_messages
+
+    # Repair keeps every message of every intact chunk, also past the damaged stretch.
+    rep = repair_bag(writer.path.parent, keep_damaged=False)
+    lost = {v for _, values in hit for v in values}
+    assert rep.scan.messages == 1000 - len(lost)
+    got = [int(m.data.split()[0]) for _, _, m in read_with_rosbags(writer.path.parent)]
+    assert got == [i for i in range(1000) if i not in lost]
+
+
+def test_an_intact_bag_has_no_damaged_chunk(tmp_path: Path) -> None:
+    from hri_physio_bridge.bag.integrity import check_chunks
+
+    writer = _complete_bag(tmp_path / "ok", n=200)
+    check = check_chunks(writer.path)
+    assert check.damaged == [] and check.unreadable_messages == 0
+    assert BagReader(writer.path.parent).damaged_chunks() == []
+
+
+def test_a_killed_bag_counts_the_messages_of_its_damaged_chunk(tmp_path: Path) -> None:
+    writer = _killed_bag(tmp_path / "k", n=30, per_chunk=10)
+    data = bytearray(writer.path.read_bytes())
+    chunks = [o for op, _n, o in _record_offsets(bytes(data)) if op == 0x06]
+    data[chunks[1] + 80: chunks[1] + 90] = b"\xff" * 10
+    (tmp_path / "damaged.mcap").write_bytes(bytes(data))
+    reader = BagReader(tmp_path / "damaged.mcap")
+    assert [(c.offset, c.messages) for _p, c in reader.damaged_chunks()] == [(chunks[1], 10)]
+    assert reader.unreadable_messages == 10 and reader.message_count == 20

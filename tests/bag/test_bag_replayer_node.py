@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import re
 import signal
 import subprocess
 import sys
@@ -17,7 +18,7 @@ from std_msgs.msg import Float64MultiArray, String
 from helpers import NodeProcess, wait_until
 from hri_physio_bridge.bag.writer import BagWriter
 
-pytestmark = [pytest.mark.ros]
+pytestmark = [pytest.mark.integration, pytest.mark.ros]
 NS = 1_000_000_000
 T0 = 1_700_000_000 * NS
 BIN = Path(sys.prefix) / "bin"
@@ -55,8 +56,8 @@ def _decoded(raw: list[bytes], msg_type: type) -> list:
     return [deserialize_message(b, msg_type) for b in raw]
 
 
-def _replay(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
-    return subprocess.run([str(BIN / "replayer"), *args], capture_output=True, text=True, timeout=timeout)
+def _replay(*args: str, timeout: float = 60, script: str = "replayer") -> subprocess.CompletedProcess:
+    return subprocess.run([str(BIN / script), *args], capture_output=True, text=True, timeout=timeout)
 
 
 def test_plays_bytes_in_order_with_remap(tmp_path: Path, prefix: str, collector: RawCollector) -> None:
@@ -204,10 +205,59 @@ def test_clear_errors(tmp_path: Path) -> None:
     unknown.write("/x", T0, b"\x00\x01\x00\x00\x05\x00\x00\x00")
     unknown.close()
     one_line_error(_replay(str(tmp_path / "unknown")), "not installed for /x [nonexistent_msgs/msg/Thing]")
-    one_line_error(_replay(str(tmp_path / "unknown"), "--rate", "-1"), "must be >= 0")
+    one_line_error(_replay(str(tmp_path / "unknown"), "--rate", "-1"), "rate")
+    one_line_error(_replay(str(tmp_path / "unknown"), "--ros-args", "-p", "rate:=fast"), "rate")
+    one_line_error(_replay(str(tmp_path / "unknown"), "--ros-args", "-p", "clock_step:=0"), "clock_step")
+    one_line_error(_replay(str(tmp_path / "unknown"), "--ros-args", "-p", "topics:=[1, 2]"), "topics")
+    one_line_error(_replay(str(tmp_path / "unknown"), "--ros-args", "-p", "colour:=red"), "colour")
+    unknown = str(tmp_path / "unknown")
+    one_line_error(_replay(unknown, "--ros-args", "--params-file", str(tmp_path / "no.yaml")), "no.yaml")
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("physio_replayer:\n  ros__parameters: {rate: [1\n")
+    one_line_error(_replay(unknown, "--ros-args", "--params-file", str(broken)), "broken.yaml")
     one_line_error(_replay(str(tmp_path / "unknown"), "--remap", "/x=/y"), "/from:=/to")
     one_line_error(_replay(str(tmp_path / "unknown"), "--topics", "/nope"), "not in the bag")
     r = _replay(str(tmp_path / "unknown"), "--info")
     assert r.returncode == 0 and "/x [nonexistent_msgs/msg/Thing] 1 msgs" in r.stdout
     r = _replay("--help")
     assert r.returncode == 0 and "--clock-step" in r.stdout
+
+
+def test_info_checks_every_chunk_of_a_bag_with_flipped_bytes(tmp_path: Path) -> None:
+    """400 bytes flipped mid-file: --info used to say "complete: yes" while playback stopped
+    part-way; it now names the damaged chunk and how many messages it holds."""
+    from std_msgs.msg import String as Msg
+
+    n = 1000
+    make_bag(tmp_path / "flipped", [("/a", T0 + i * 10_000_000, Msg(data=f"{i:05d} " + "x" * 80))
+                                    for i in range(n)], chunk_size=4096)
+    mcap = tmp_path / "flipped" / "flipped_0.mcap"
+    data = bytearray(mcap.read_bytes())
+    for i in range(len(data) // 2, len(data) // 2 + 400):
+        data[i] ^= 0xFF
+    mcap.write_bytes(bytes(data))
+
+    info = _replay(str(tmp_path / "flipped"), "--info", script="physio_replayer")
+    assert info.returncode == 0, info.stderr
+    assert "complete:  no (" in info.stdout and "damaged chunk" in info.stdout, info.stdout
+    damaged = [line for line in info.stdout.splitlines() if line.startswith("damaged:")]
+    assert len(damaged) >= 1, info.stdout
+    held = sum(int(re.search(r"(\d+) message\(s\) unreadable", line).group(1)) for line in damaged)
+    assert f"holding {held} message(s)" in info.stdout
+
+    # What --info says is lost is what a repair cannot bring back, and nothing more.
+    fix = subprocess.run([str(BIN / "physio_recorder"), "--repair", str(tmp_path / "flipped")],
+                         capture_output=True, text=True, timeout=60)
+    assert fix.returncode == 0 and f"recovered {n - held} messages" in fix.stdout, fix.stdout + fix.stderr
+    after = _replay(str(tmp_path / "flipped"), "--info")
+    assert "complete:  yes" in after.stdout and f"messages:  {n - held}" in after.stdout, after.stdout
+
+
+def test_new_names_and_old_names_run_the_same_command(tmp_path: Path) -> None:
+    bag = tmp_path / "b"
+    make_bag(bag, [("/a", T0, String(data="x"))])
+    for script in ("physio_replayer", "replayer"):
+        r = _replay(str(bag), "--info", script=script)
+        assert r.returncode == 0 and "/a [std_msgs/msg/String] 1 msgs" in r.stdout, r.stderr
+        r = _replay(str(bag), "--rate", "-1", script=script)
+        assert r.returncode == 2 and r.stderr.startswith(f"{script}: error:"), r.stderr

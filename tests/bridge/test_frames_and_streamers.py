@@ -218,6 +218,7 @@ def test_csv_input_errors_name_the_problem(tmp_path: Path) -> None:
     ragged.write_text("t,a\n1,2\n2,3,4\n")
     s = create_streamer(f"csv:{ragged}?rate=0")
     s.open_input()
+    assert s.receive().num_samples == 1  # the good row first, then the error
     with pytest.raises(StreamMismatchError, match=r"r\.csv:3: expected 2 columns, got 3"):
         s.receive()
     text = tmp_path / "n.csv"
@@ -230,6 +231,54 @@ def test_csv_input_errors_name_the_problem(tmp_path: Path) -> None:
     wide.write_text("t,a,b\n1,2,3\n")
     with pytest.raises(StreamMismatchError, match=r"2 data column.*num_channels is 1"):
         create_streamer(f"csv:{wide}").open_input(StreamSpec("w", channel_count=1))
+
+
+def _read_all(path: Path, max_chunk: int = 1024) -> tuple[list[float], Exception | None]:
+    s = CsvStreamer(f"{path}?rate=0", max_chunk=max_chunk)
+    s.open_input()
+    got: list[float] = []
+    try:
+        while (frame := s.receive()) is not None:
+            got.extend(frame.timestamps.tolist())
+    except StreamMismatchError as exc:
+        return got, exc
+    return got, None
+
+
+@pytest.mark.parametrize(
+    "body,line,what",
+    [
+        (b"t,a\n1,abc\n2,3\n3,4\n", 2, "not a number"),  # reported as line 4 (the chunk's end) before
+        (b"t,a\n1,1\n\n2,x\n", 4, "not a number"),  # blank lines count as lines
+        (b"t,a\n1,1\n2,2,2\n", 3, "expected 2 columns, got 3"),
+        (b"t,a\n1,1\n2,\xff\xfe\n3,3\n", 3, "not UTF-8 text"),  # UnicodeDecodeError traceback before
+        (b"t,a\r1,1\r2,oops\r", 3, "not a number"),  # lines ended by a carriage return alone
+        (b"t,a\r\n1,1\r\n2,oops\r\n", 3, "not a number"),
+    ],
+)
+def test_csv_input_errors_name_the_exact_line_after_the_good_rows(tmp_path: Path, body: bytes, line: int,
+                                                                   what: str) -> None:
+    path = tmp_path / "in.csv"
+    path.write_bytes(body)
+    got, error = _read_all(path)
+    assert error is not None and str(error).startswith(f"{path}:{line}: {what}"), error
+    assert got == [float(i) for i in range(1, line - body.count(b"\n\n") - 1)]  # every row before it
+
+
+def test_csv_header_that_is_not_utf8_is_named(tmp_path: Path) -> None:
+    path = tmp_path / "h.csv"
+    path.write_bytes(b"t,\xe9cg\n1,2\n")
+    with pytest.raises(StreamMismatchError, match=r"h\.csv:1: not UTF-8 text"):
+        CsvStreamer(str(path)).open_input()
+
+
+def test_csv_utf8_labels_and_strings_read_back(tmp_path: Path) -> None:
+    path = tmp_path / "u.csv"
+    path.write_text("t,marker\n1,ünïcode\n2,\"a, b\"\n", encoding="utf-8")
+    s = CsvStreamer(f"{path}?rate=0&dtype=string")
+    s.open_input()
+    frame = s.receive()
+    assert frame.values[:, 0].tolist() == ["ünïcode", "a, b"]
 
 
 def test_csv_replay_paces_by_timestamps(tmp_path: Path) -> None:

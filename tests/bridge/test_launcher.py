@@ -12,6 +12,8 @@ import pytest
 
 from hri_physio_bridge.launcher import ProcessGroup, find_executable
 
+pytestmark = pytest.mark.integration  # starts processes
+
 
 def script(tmp_path: Path, name: str, body: str) -> str:
     path = tmp_path / name
@@ -58,6 +60,30 @@ def test_stop_sends_sigint_first_and_escalates(on_path: Path) -> None:
     codes = group.stop(grace=0.5)
     assert codes["polite"] == 0 and "flushed" in polite.lines
     assert codes["stubborn"] == -9  # SIGKILL after SIGINT and SIGTERM were ignored
+
+
+def test_a_failed_node_is_reported_by_its_own_error_line() -> None:
+    """What a launcher says when a node refuses to start: the node's one-line error, not a count."""
+    group = ProcessGroup(out=io.StringIO())
+    sim = group.start("simulator", "physio_simulator", ["--bpm", "0"], env=dict(os.environ), echo=False)
+    assert group.wait_any_exit(60) is sim
+    group.stop()
+    assert sim.returncode == 2
+    line = sim.error_line()
+    assert line.startswith("physio_simulator: error:") and "bpm" in line, sim.lines
+
+
+def test_wait_any_exit_ends_on_timeout_and_on_stop(on_path: Path) -> None:
+    import threading
+
+    script(on_path, "idle_node", "import time\nwhile True: time.sleep(0.05)\n")
+    group = ProcessGroup(out=io.StringIO())
+    group.start("idle", "idle_node", env=dict(os.environ))
+    assert group.wait_any_exit(0.2) is None
+    stop = threading.Event()
+    threading.Timer(0.2, stop.set).start()
+    assert group.wait_any_exit(None, stop=stop) is None and stop.is_set()
+    group.stop(grace=2.0)
 
 
 def test_missing_console_script_is_named() -> None:

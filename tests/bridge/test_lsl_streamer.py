@@ -20,7 +20,7 @@ from hri_physio_bridge.receiver import PhysioReceiver, ReceiverConfig
 from hri_physio_bridge.streamers import OpenCancelled, StreamNotFoundError, numpy_dtype
 from hri_physio_bridge.streamers.lsl import LslStreamer
 
-pytestmark = pytest.mark.lsl
+pytestmark = [pytest.mark.integration, pytest.mark.lsl]
 
 RATE = 130.0
 N = 40  # samples per format test

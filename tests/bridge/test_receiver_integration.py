@@ -18,7 +18,7 @@ import pytest
 
 from helpers import NodeProcess, RosFrameCollector, concat_new_samples, wait_until
 
-pytestmark = [pytest.mark.ros, pytest.mark.lsl]
+pytestmark = [pytest.mark.integration, pytest.mark.ros, pytest.mark.lsl]
 
 RATE = 130.0
 
@@ -397,13 +397,21 @@ def test_nan_samples_are_reported_and_forwarded(lsl_name: str, collector: RosFra
     "conf_text,args,message",
     [
         ("input: [unclosed\n", [], "is not valid YAML at line"),
-        ("input: lsl:x\ncolour: red\n", [], "unknown option(s) ['colour']"),
-        ("output_frame: 0\n", [], "output_frame must be a whole number >= 1"),
+        ("input: lsl:x\ncolour: red\n", [], "colour"),
+        ("output_frame: 0\n", [], "output_frame"),
         ("", ["--input", "udp:1234"], "unknown stream scheme 'udp'"),
-        ("", ["--sample-overlap", "3", "--output-frame", "2"], "sample_overlap must be >= 0 and <"),
+        ("", ["--input", "lsl:a?colour=red"], "colour"),
+        ("", ["--output", "ros:relative/topic"], "output"),
+        ("", ["--sample-overlap", "3", "--output-frame", "2"], "sample_overlap"),
         ("", ["--dtype", "complex"], "unknown dtype 'complex'"),
         ("", ["--input", "lsl:a", "--output", "lsl:b", "--wait-for-consumers", "5", "--min-consumers", "2"],
          "output lsl:b cannot count its listeners"),
+        ("", ["--ros-args", "-p", "output_frame:=abc"], "output_frame"),
+        ("", ["--ros-args", "-p", "sampling_rate:=fast"], "sampling_rate"),
+        ("", ["--ros-args", "-p", "reconnect:=maybe"], "reconnect"),
+        ("", ["--ros-args", "-p", "input:=udp:1"], "udp"),
+        ("", ["--ros-args", "--params-file", "/nonexistent/params.yaml"], "/nonexistent/params.yaml"),
+        ("", ["--ros-args", "-p"], "-p"),
     ],
 )
 def test_bad_configuration_one_clear_message(tmp_path: Path, conf_text: str, args: list,
@@ -413,7 +421,18 @@ def test_bad_configuration_one_clear_message(tmp_path: Path, conf_text: str, arg
     with NodeProcess("physio_receiver", "--conf", str(conf), *args) as rx:
         code = rx.wait(30)
     assert code == 2, rx.output
-    assert message in rx.output and "Traceback" not in rx.output, rx.output
+    lines = rx.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("physio_receiver: error:"), rx.output
+    assert message in lines[0], rx.output
+
+
+def test_broken_params_file_is_one_line(tmp_path: Path) -> None:
+    params = tmp_path / "params.yaml"
+    params.write_text("physio_receiver:\n  ros__parameters:\n    output_frame: [4\n")
+    with NodeProcess("physio_receiver", "--ros-args", "--params-file", str(params)) as rx:
+        assert rx.wait(30) == 2, rx.output
+    lines = rx.output.strip().splitlines()
+    assert len(lines) == 1 and str(params) in lines[0] and "not valid YAML" in lines[0], rx.output
 
 
 def test_missing_conf_file_and_help() -> None:
@@ -486,3 +505,74 @@ def test_lsl_string_markers_to_ros_json(lsl_name: str, ros_context) -> None:
     assert got == [{"t": 100.0 + i, "data": text} for i, text in enumerate(texts)]
     executor.shutdown()
     node.destroy_node()
+
+
+# -- the receiver checks what it is told --------------------------------------------------------
+
+
+def test_a_500_hz_stream_read_at_130_hz_is_refused_naming_both_rates(lsl_name: str) -> None:
+    outlet = pylsl.StreamOutlet(pylsl.StreamInfo(lsl_name, "ECG", 1, 500.0, pylsl.cf_double64, lsl_name))
+    with NodeProcess("physio_receiver", "--input", f"lsl:{lsl_name}", "--output", "ros:/test/rate") as rx:
+        code = rx.wait(30)
+    assert code == 1, rx.output
+    errors = [line for line in rx.output.splitlines() if "[ERROR]" in line]
+    assert len(errors) == 1 and "500 Hz" in errors[0] and "130 Hz" in errors[0], rx.output
+    assert "connected" not in rx.output and "Traceback" not in rx.output, rx.output
+    del outlet
+
+
+def test_without_reconnect_a_lost_input_says_what_happens(lsl_name: str,
+                                                          collector: RosFrameCollector) -> None:
+    topic = f"/test/{lsl_name.split('/')[0]}/no_reconnect"
+    got = collector.subscribe_frames(topic)
+    outlet = counter_outlet(lsl_name, channels=1)
+    with NodeProcess("physio_receiver", "--input", f"lsl:{lsl_name}", "--output", f"ros:{topic}",
+                     "--reconnect", "false", "--wait-for-consumers", "20") as rx:
+        rx.wait_for_output("has a consumer")
+        wait_until(outlet.have_consumers, 20, "discovery")
+        push_counter(outlet, 0, 100, pylsl.local_clock(), channels=1)
+        wait_until(lambda: sum(f.num_samples for f in got) >= 100, 20, "the samples before the loss")
+        del outlet
+        code = rx.wait(30)
+    assert code == 1, rx.output
+    assert "input lost; reconnect is off: publishing what is buffered and exiting" in rx.output, rx.output
+    assert "waiting for it to come back" not in rx.output and "Traceback" not in rx.output, rx.output
+    assert sum(f.num_samples for f in got) == 100
+
+
+def test_clock_jumps_are_counted_apart_from_gaps(lsl_name: str, collector: RosFrameCollector) -> None:
+    """A sender's clock goes 5 s back, then returns: 2 clock jumps, 0 gaps, 0 missing, all forwarded."""
+    topic = f"/test/{lsl_name.split('/')[0]}/jumps"
+    got = collector.subscribe_frames(topic)
+    outlet = counter_outlet(lsl_name, channels=1)
+    with NodeProcess("physio_receiver", "--input", f"lsl:{lsl_name}", "--output", f"ros:{topic}",
+                     "--output-frame", "13", "--wait-for-consumers", "20") as rx:
+        rx.wait_for_output("has a consumer")
+        wait_until(outlet.have_consumers, 20, "discovery")
+        t0 = pylsl.local_clock()
+        stamps = t0 + np.arange(1300) / RATE
+        stamps[390:910] -= 5.0
+        for i in range(0, 1300, 13):
+            outlet.push_chunk([[float(k)] for k in range(i, i + 13)], timestamp=list(stamps[i:i + 13]))
+        wait_until(lambda: sum(f.num_samples for f in got) >= 1300, 30, lambda: rx.output)
+        assert rx.stop(signal.SIGINT) == 0, rx.output
+    final = [line for line in rx.output.splitlines() if "stopped: {" in line][-1]
+    assert "'clock_jumps': 2" in final and "'gaps': 0" in final and "'missing_samples': 0" in final, final
+    values = np.concatenate([f.values[:, 0] for f in got])
+    np.testing.assert_array_equal(values, np.arange(1300))
+    np.testing.assert_array_equal(np.concatenate([f.timestamps for f in got]), stamps)
+
+
+def test_csv_input_with_invalid_utf8_is_one_error_and_keeps_the_rows_before(tmp_path: Path) -> None:
+    src = tmp_path / "session.csv"
+    rows = b"".join(f"{100 + i / RATE!r},{i}\n".encode() for i in range(40))
+    src.write_bytes(b"t,count\n" + rows + b"100.5,\xe9t\xe9\n" + b"100.6,41\n")
+    out = tmp_path / "out.csv"
+    with NodeProcess("physio_receiver", "--input", f"csv:{src}?rate=0", "--output", f"csv:{out}",
+                     "--output-frame", "8") as rx:
+        code = rx.wait(60)
+    assert code == 1, rx.output
+    assert f"{src}:42: not UTF-8 text" in rx.output and "Traceback" not in rx.output, rx.output
+    assert "UnicodeDecodeError" not in rx.output, rx.output
+    table = np.loadtxt(out, delimiter=",", skiprows=1)
+    np.testing.assert_array_equal(table[:, 1], np.arange(40))  # every row before the bad line

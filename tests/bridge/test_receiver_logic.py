@@ -18,8 +18,10 @@ from hri_physio_bridge.streamers import (
     Streamer,
     StreamerError,
     StreamLostError,
+    StreamMismatchError,
     StreamNotFoundError,
     StreamSpec,
+    factory,
 )
 from hri_physio_bridge.streamers.csv_stream import CsvStreamer
 
@@ -116,6 +118,16 @@ class CountingSink(MemorySink):
         return self.count
 
 
+def _memory_streamer(address: str, **_: object) -> Streamer:
+    return MemorySink() if address == "sink" else MemorySource(StreamSpec(address))
+
+
+@pytest.fixture(autouse=True)
+def _memory_transport(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Addresses are checked against the known transports: make mem: one, for these tests only."""
+    monkeypatch.setitem(factory._REGISTRY, "mem", _memory_streamer)
+
+
 def chunk(start: int, n: int, rate: float = 100.0, channels: int = 1) -> Frame:
     idx = np.arange(start, start + n, dtype=float)
     return Frame(idx / rate, np.column_stack([idx] * channels))
@@ -203,15 +215,19 @@ def test_lost_source_reconnects_and_keeps_data() -> None:
     assert [g.count for g in rx.stats.gaps] == [12]
 
 
-def test_lost_source_without_reconnect_is_fatal_but_flushes() -> None:
+def test_lost_source_without_reconnect_is_fatal_but_flushes(caplog: pytest.LogCaptureFixture) -> None:
     rx, src, sink = make(reconnect=False)
-    rx.start()
-    src.chunks.put(chunk(0, 6))
-    src.chunks.put(StreamLostError("gone"))
-    assert rx.wait(5.0)
-    rx.stop()
-    assert isinstance(rx.fatal, StreamLostError)
+    with caplog.at_level(logging.INFO, logger="test"):
+        rx.start()
+        src.chunks.put(chunk(0, 6))
+        src.chunks.put(StreamLostError("gone"))
+        assert rx.wait(5.0)
+        rx.stop()
+    assert isinstance(rx.fatal, StreamLostError) and src.opens == 1
     assert sum(f.num_samples for f in sink.frames) == 6
+    # It says what it does, not that it waits for the input to come back.
+    assert log_lines(caplog, "input lost; reconnect is off: publishing what is buffered and exiting")
+    assert not log_lines(caplog, "waiting for it to come back")
 
 
 def test_wrong_channel_count_chunk_is_rejected_and_counted() -> None:
@@ -361,36 +377,39 @@ def test_request_stop_ends_the_wait_for_a_consumer(caplog: pytest.LogCaptureFixt
 
 
 @pytest.mark.parametrize(
-    "overrides,match",
+    "overrides,option",
     [
-        ({"output_frame": 0}, "output_frame must be a whole number >= 1"),
-        ({"sample_overlap": 4}, "sample_overlap must be >= 0 and < output_frame"),
-        ({"buffer_length": 2}, "buffer_length must hold at least one output frame"),
-        ({"dtype": "complex128"}, "dtype: unknown dtype"),
-        ({"sampling_rate": -5}, "sampling_rate must be >= 0"),
-        ({"sampling_rate": "fast"}, "sampling_rate must be a number"),
-        ({"overflow_policy": "panic"}, "unknown overflow policy"),
-        ({"log_data": "yes"}, "log_data must be true or false"),
-        ({"num_channels": 2.5}, "num_channels must be a whole number"),
-        ({"colour": "red"}, r"unknown option\(s\) \['colour'\]"),
-        ({"input": ""}, "input must be a stream address"),
-        ({"channel_names": ["a", "b"]}, "channel_names must list num_channels"),
-        ({"min_consumers": 0}, "min_consumers must be a whole number >= 1"),
-        ({"min_consumers": 2}, "min_consumers only counts while waiting: set wait_for_consumers"),
+        ({"output_frame": 0}, "output_frame"),
+        ({"sample_overlap": 4}, "sample_overlap"),
+        ({"buffer_length": 2}, "buffer_length"),
+        ({"dtype": "complex128"}, "dtype"),
+        ({"sampling_rate": -5}, "sampling_rate"),
+        ({"sampling_rate": "fast"}, "sampling_rate"),
+        ({"overflow_policy": "panic"}, "overflow_policy"),
+        ({"log_data": "perhaps"}, "log_data"),
+        ({"num_channels": 2.5}, "num_channels"),
+        ({"colour": "red"}, "colour"),
+        ({"input": ""}, "input"),
+        ({"input": "udp:1234"}, "udp"),
+        ({"output": "/no/scheme"}, "output"),
+        ({"channel_names": ["a", "b"]}, "channel_names"),
+        ({"min_consumers": 0}, "min_consumers"),
+        ({"min_consumers": 2}, "min_consumers"),
     ],
 )
-def test_bad_configuration_is_named(overrides: dict, match: str) -> None:
+def test_bad_configuration_is_named(overrides: dict, option: str) -> None:
     opts = {"output_frame": 4}
     opts.update(overrides)
-    with pytest.raises(ConfigError, match=match):
+    with pytest.raises(ConfigError) as err:
         ReceiverConfig.from_mapping(opts)
+    assert option in str(err.value) and "\n" not in str(err.value)
 
 
 def test_waits_for_min_consumers_before_reading(caplog: pytest.LogCaptureFixture) -> None:
     """A processor and a recorder must both see the first sample: with min_consumers 2 the
     receiver reads nothing while only one listens, and starts once the second one does."""
     cfg = ReceiverConfig.from_mapping({"input": "mem:source", "output": "mem:sink", "output_frame": 4,
-                                       "wait_for_consumers": 30.0, "min_consumers": 2})
+                                       "wait_for_consumers": 30.0, "min_consumers": 2, "sampling_rate": 100})
     src = MemorySource(StreamSpec("src", channel_count=1, nominal_rate=100.0))
     sink = CountingSink()
     rx = PhysioReceiver(cfg, src, sink, log=logging.getLogger("test"))
@@ -417,7 +436,7 @@ def test_waits_for_min_consumers_before_reading(caplog: pytest.LogCaptureFixture
 def test_min_consumers_times_out_with_the_count_named(caplog: pytest.LogCaptureFixture) -> None:
     now = [0.0]
     cfg = ReceiverConfig.from_mapping({"input": "mem:source", "output": "mem:sink", "output_frame": 4,
-                                       "wait_for_consumers": 5.0, "min_consumers": 3})
+                                       "wait_for_consumers": 5.0, "min_consumers": 3, "sampling_rate": 100})
     sink = CountingSink()
     sink.count = 1
     rx = PhysioReceiver(cfg, MemorySource(StreamSpec("src", nominal_rate=100.0)), sink,
@@ -436,3 +455,177 @@ def test_min_consumers_needs_an_output_that_counts() -> None:
                                        "wait_for_consumers": 5.0, "min_consumers": 2})
     with pytest.raises(ConfigError, match="output mem:sink cannot count its listeners"):
         PhysioReceiver(cfg, MemorySource(StreamSpec("src")), MemorySink())
+
+
+# -- what the input declares, and what its timestamps say ----------------------------------------
+
+
+def test_a_stream_declaring_another_rate_is_refused_at_open() -> None:
+    """A 500 Hz stream read with the default 130 Hz used to be 'connected ... @ 130 Hz' without a word."""
+    cfg = ReceiverConfig.from_mapping({"input": "mem:source", "output": "mem:sink"})  # 130 Hz
+    src = MemorySource(StreamSpec("src", nominal_rate=500.0))
+    sink = MemorySink()
+    rx = PhysioReceiver(cfg, src, sink, log=logging.getLogger("test"))
+    with pytest.raises(StreamMismatchError) as err:
+        rx.open()
+    message = str(err.value)
+    assert "500 Hz" in message and "130 Hz" in message and "sampling_rate" in message and "\n" not in message
+    assert rx.buffer is None and sink.spec is None  # nothing was opened downstream
+
+
+def test_a_stream_declaring_no_rate_is_taken_with_a_warning(caplog: pytest.LogCaptureFixture) -> None:
+    cfg = ReceiverConfig.from_mapping({"input": "mem:source", "output": "mem:sink", "sampling_rate": 100})
+    src = MemorySource(StreamSpec("src", nominal_rate=0.0))
+    rx = PhysioReceiver(cfg, src, MemorySink(), log=logging.getLogger("test"))
+    with caplog.at_level(logging.WARNING, logger="test"):
+        run_to_end(rx, src, [chunk(0, 10)])
+    assert rx.stats.published_samples == 10
+    assert log_lines(caplog, "declares no nominal rate")
+
+
+@pytest.mark.parametrize("changed", [{"nominal_rate": 500.0}, {"channel_count": 2}])
+def test_a_stream_that_comes_back_as_another_stream_is_an_error(changed: dict) -> None:
+    """After a reconnect, another rate (or channel count) must not be mixed into the same output."""
+    rx, src, sink = make()
+    rx.start()
+    src.chunks.put(chunk(0, 8))
+    src.available.clear()
+    src.chunks.put(StreamLostError("memory stream lost"))
+    spec = {"name": "src", "channel_count": 1, "nominal_rate": 100.0, **changed}
+    src._spec = StreamSpec(**spec)  # the source that comes back is another stream
+    threading.Timer(0.2, src.available.set).start()
+    src.chunks.put(chunk(8, 8))
+    assert rx.wait(10.0)
+    rx.stop()
+    assert isinstance(rx.fatal, StreamMismatchError) and "came back as another stream" in str(rx.fatal)
+    assert rx.stats.reconnects == 0 and src.opens == 2
+    np.testing.assert_array_equal(np.concatenate([f.values[:, 0] for f in sink.frames]), np.arange(8))
+
+
+def stamped(stamps: np.ndarray, first_value: int = 0) -> Frame:
+    return Frame(np.asarray(stamps, dtype=float), np.arange(first_value, first_value + len(stamps),
+                                                             dtype=float).reshape(-1, 1))
+
+
+def test_a_backward_clock_jump_and_its_return_are_jumps_not_gaps(caplog: pytest.LogCaptureFixture) -> None:
+    """5 s back, then forward again onto the earlier timeline: nothing is missing. (Before: the
+    return counted as a gap of 650 'missing' samples, the jumps were not counted at all.)"""
+    rate = 130.0
+    k = np.arange(130 * 30)
+    t = k / rate
+    t[130 * 10:130 * 20] -= 5.0  # the sender's clock runs 5 s behind for 10 s, then comes back
+    rx, src, sink = make(sampling_rate=rate, output_frame=13)
+    with caplog.at_level(logging.WARNING, logger="test"):
+        run_to_end(rx, src, [stamped(t[i:i + 13], i) for i in range(0, len(t), 13)])
+    status = rx.status()
+    assert (status["gaps"], status["missing_samples"], status["clock_jumps"]) == (0, 0, 2)
+    assert [j.kind for j in rx.stats.clock_jumps] == ["backward", "returned"]
+    values = np.concatenate([f.values[:, 0] for f in sink.frames])
+    np.testing.assert_array_equal(values, k)  # every sample forwarded, once, in order
+    np.testing.assert_array_equal(np.concatenate([f.timestamps for f in sink.frames]), t)  # unchanged
+    assert len(log_lines(caplog, "clock jump")) == 1  # the second within 5 s is counted, not logged
+    assert not log_lines(caplog, "gap of")
+
+
+def test_samples_missing_after_a_returning_clock_are_a_gap_of_the_right_size() -> None:
+    rate = 100.0
+    t = np.r_[np.arange(0, 500), np.arange(500, 700) - 300, np.arange(750, 800)] / rate  # 3 s back, then
+    rx, src, _ = make(sampling_rate=rate)  # forward onto the earlier timeline 50 samples late
+    run_to_end(rx, src, [stamped(t[i:i + 10], i) for i in range(0, len(t), 10)])
+    assert [j.kind for j in rx.stats.clock_jumps] == ["backward", "returned"]
+    assert [g.count for g in rx.stats.gaps] == [50]
+    assert rx.stats.gaps[0].first_t == pytest.approx(7.0) and rx.stats.gaps[0].last_t == pytest.approx(7.49)
+
+
+def test_repeated_timestamps_are_flagged_counted_and_logged_at_most_every_5_s(
+        caplog: pytest.LogCaptureFixture) -> None:
+    now = [0.0]
+    rx, _, _ = make(sampling_rate=10, buffer_length=200, monotonic=lambda: now[0])
+    rx.open()
+    with caplog.at_level(logging.WARNING, logger="test"):
+        for i in range(40):  # a 10 Hz sender that stamps two samples alike, ten times a second
+            now[0] = i * 0.1
+            rx._accept(stamped([i * 0.1, i * 0.1]))
+    rx.stop()
+    assert rx.status()["clock_jumps"] == 40 and rx.status()["gaps"] == 0
+    lines = log_lines(caplog, "clock jump")
+    assert len(lines) == 1, lines  # 4 s of repeats: the first line only; before, ~10 lines a second
+
+
+def test_measured_rate_off_by_more_than_5_percent_is_warned_and_reported(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """Declared 100 Hz, sent at 110 Hz: measured_rate in the status, a warning (rate-limited)."""
+    now = [0.0]
+    rx, _, _ = make(buffer_length=5000, monotonic=lambda: now[0])
+    rx.open()
+    with caplog.at_level(logging.WARNING, logger="test"):
+        for i in range(0, 110 * 20, 11):  # 20 s of stream, one chunk each 0.1 s
+            now[0] = i / 110
+            rx._accept(stamped(np.arange(i, i + 11) / 110.0, i))
+    rx.stop()
+    assert rx.status()["measured_rate"] == pytest.approx(110.0)
+    assert len(log_lines(caplog, "measured rate 110 Hz is +10% off sampling_rate 100 Hz")) == 1
+
+
+def test_measured_rate_ignores_gaps_and_needs_a_few_seconds() -> None:
+    now = [0.0]
+    rx, _, _ = make(buffer_length=5000, monotonic=lambda: now[0])
+    rx.open()
+    rx._accept(stamped(np.arange(0, 200) / 100.0))
+    now[0] = 2.0
+    rx._accept(stamped(np.arange(200, 300) / 100.0))  # 3 s of timestamps: not enough yet
+    assert rx.status()["measured_rate"] is None
+    now[0] = 10.0
+    rx._accept(stamped(np.arange(400, 900) / 100.0))  # after a gap of 100 samples
+    rx.stop()
+    assert rx.status()["measured_rate"] == pytest.approx(100.0) and rx.status()["gaps"] == 1
+
+
+def test_csv_input_that_is_not_utf8_is_one_error_naming_file_and_line(tmp_path: Path) -> None:
+    """No UnicodeDecodeError traceback; every row before the bad line is forwarded."""
+    path = tmp_path / "session.csv"
+    rows = b"".join(f"{i / 100},{i}\n".encode() for i in range(50))
+    path.write_bytes(b"t,a\n" + rows + b"0.5,\xff\n0.51,51\n")
+    cfg = ReceiverConfig.from_mapping({"input": f"csv:{path}?rate=0", "output": "mem:sink",
+                                       "sampling_rate": 0, "input_frame": 32})
+    sink = MemorySink()
+    rx = PhysioReceiver(cfg, CsvStreamer(f"{path}?rate=0", max_chunk=32), sink, log=logging.getLogger("test"))
+    rx.start()
+    assert rx.wait(5.0)
+    rx.stop()
+    assert isinstance(rx.fatal, StreamMismatchError)
+    assert str(rx.fatal).startswith(f"{path}:52: not UTF-8 text"), rx.fatal
+    np.testing.assert_array_equal(np.concatenate([f.values[:, 0] for f in sink.frames]), np.arange(50))
+
+
+class LateSource(MemorySource):
+    """An input whose samples arrive just as the stop comes: a receive call that started before
+    ``arrived`` was set waits its whole timeout and returns nothing, as an LSL inlet whose data
+    landed after the pull began."""
+
+    def __init__(self, spec: StreamSpec) -> None:
+        super().__init__(spec)
+        self.arrived = threading.Event()
+        self.calls = threading.Event()
+
+    def receive(self, timeout: float = 0.1) -> Frame | None:
+        self.calls.set()
+        if not self.arrived.is_set():
+            time.sleep(timeout)
+            return None
+        return super().receive(0.0)
+
+
+def test_samples_that_arrived_before_the_stop_are_forwarded() -> None:
+    cfg = ReceiverConfig.from_mapping({"input": "mem:source", "output": "mem:sink", "sampling_rate": 100,
+                                       "output_frame": 4})
+    src = LateSource(StreamSpec("src", nominal_rate=100.0))
+    sink = MemorySink()
+    rx = PhysioReceiver(cfg, src, sink, log=logging.getLogger("test"))
+    rx.start()
+    assert src.calls.wait(5.0)
+    for i in range(0, 30, 10):
+        src.chunks.put(chunk(i, 10))
+    src.arrived.set()
+    rx.stop()  # before: the producer saw the stop and left these 30 samples in the input
+    np.testing.assert_array_equal(np.concatenate([f.values[:, 0] for f in sink.frames]), np.arange(30))

@@ -1,10 +1,12 @@
-"""hri_physio_demo: the built-in default session, with no hardware.
+"""physio_bridge_demo (alias hri_physio_demo): the bridge alone, with no hardware.
 
-Starts the NeuroKit2 simulator as a Polar H10 (ECG at 130 Hz and HR at 1 Hz on
-LSL), one physio_receiver per stream (LSL -> ROS 2 topics of DESIGN.md), and
-watches the ROS 2 topics from this process, printing live progress. When the
-simulated session ends, everything is stopped cleanly and a summary says how
-many samples arrived versus how many were sent.
+Starts the NeuroKit2 simulator as a Polar H10 (ECG at 130 Hz and HR at 1 Hz on LSL), one
+physio_receiver per stream (LSL -> ROS 2 topics), and watches the ROS 2 topics from this
+process, printing live progress. When the simulated session ends, everything is stopped
+cleanly and a summary says how many samples arrived versus how many were sent. (The whole
+study session, coach and robot included, is hri_physio_session.)
+
+A launcher, not a node: its options are checked (the simulator's too) before anything starts.
 """
 
 from __future__ import annotations
@@ -13,15 +15,43 @@ import argparse
 import contextlib
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
+from pydantic import model_validator
 
-from hri_physio_bridge.launcher import ProcessGroup
-from hri_physio_bridge.nodes.common import install_stop_handlers
+from hri_physio_bridge.config import ConfigError, NodeConfig, add_config_arguments, given_options, option
+from hri_physio_bridge.launcher import ManagedProcess, ProcessGroup
 from hri_physio_bridge.ros_tools import BackgroundNode
+from hri_physio_bridge.simulator import SimulatorConfig
+from hri_physio_bridge.stop_signals import install_stop_handlers
+from hri_physio_bridge.topics import POLAR_H10_ECG, POLAR_H10_HR
+from hri_physio_bridge.waiting import wait_until
 
-ECG_TOPIC = "/physio/polar_h10/ecg"
-HR_TOPIC = "/physio/polar_h10/hr"
+PROG = "physio_bridge_demo"
+#: The older name of the same command (kept: the README and users type it).
+ALIAS = "hri_physio_demo"
+ECG_RATE = 130.0
+REPORT_EVERY = 2.0  # seconds between progress lines
+SIMULATOR_WAIT = 30.0  # seconds the simulator waits for both receivers before streaming
+
+
+class DemoConfig(NodeConfig):
+    """The demo's options; the simulated ones are checked by the simulator's own model."""
+
+    seconds: float = option(30.0, "length of the simulated session", unit="s", gt=0)
+    bpm: float = option(70.0, "simulated heart rate", unit="bpm")
+    device_id: str = option("SIM0001", "simulated Polar device id")
+    quiet_nodes: bool = option(False, "do not echo the nodes' own log lines", switch=True)
+
+    @model_validator(mode="after")
+    def _simulator_accepts(self) -> DemoConfig:
+        SimulatorConfig.from_mapping(self.simulator_options(), "physio_simulator")
+        return self
+
+    def simulator_options(self) -> dict[str, object]:
+        return {"seconds": self.seconds, "signals": ["ecg", "hr"], "device_id": self.device_id,
+                "rate": ECG_RATE, "bpm": self.bpm, "wait_for_consumers": SIMULATOR_WAIT}
 
 
 class TopicWatcher(BackgroundNode):
@@ -56,86 +86,79 @@ class TopicWatcher(BackgroundNode):
             self.hr = float(f.values[-1, 0])
             self.hr_samples += f.num_samples
 
-        self.node.create_subscription(Float64MultiArray, ECG_TOPIC, on_ecg, frame_qos())
-        self.node.create_subscription(Float64MultiArray, HR_TOPIC, on_hr, frame_qos())
+        self.node.create_subscription(Float64MultiArray, POLAR_H10_ECG, on_ecg, frame_qos())
+        self.node.create_subscription(Float64MultiArray, POLAR_H10_HR, on_hr, frame_qos())
         self.start()
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="hri_physio_demo",
-        description="Simulated participant (NeuroKit2 ECG + HR as a Polar H10) -> LSL -> physio_receiver "
-        "-> ROS 2, with live progress. No hardware needed.",
-    )
-    p.add_argument("--seconds", type=float, default=30.0, help="length of the simulated session (default 30)")
-    p.add_argument("--bpm", type=float, default=70.0, help="simulated heart rate (default 70)")
-    p.add_argument("--device-id", default="SIM0001", help="simulated Polar device id (default SIM0001)")
-    p.add_argument("--quiet-nodes", action="store_true", help="do not echo the nodes' own log lines")
-    return p
+def parse_options(prog: str, argv: list[str] | None) -> DemoConfig:
+    parser = argparse.ArgumentParser(
+        prog=prog, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_config_arguments(parser, DemoConfig)
+    args = parser.parse_args(argv)
+    return DemoConfig.from_mapping(given_options(args, DemoConfig), "command line")
+
+
+def start_nodes(group: ProcessGroup, cfg: DemoConfig, echo: bool) -> ManagedProcess:
+    """One receiver per stream, then the simulator (which waits for them); returns the simulator."""
+    dev = cfg.device_id
+    for stream, topic, frame, rate, node in (("ECG", POLAR_H10_ECG, 13, ECG_RATE, "ecg_receiver"),
+                                             ("HR", POLAR_H10_HR, 1, 1.0, "hr_receiver")):
+        group.start(node, "physio_receiver", [
+            "--input", f"lsl:PolarH10/{dev}/{stream}", "--output", f"ros:{topic}",
+            "--output-frame", str(frame), "--sampling-rate", f"{rate:g}",
+            "--resolve-timeout", "30", "--wait-for-consumers", "10",
+            "--ros-args", "-r", f"__node:={node}",
+        ], echo=echo)
+    return group.start("simulator", "physio_simulator", [
+        "--seconds", f"{cfg.seconds:g}", "--signals", "ecg,hr", "--device-id", dev,
+        "--rate", f"{ECG_RATE:g}", "--bpm", f"{cfg.bpm:g}", "--wait-for-consumers", f"{SIMULATOR_WAIT:g}",
+    ], echo=echo)
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    if args.seconds <= 0:
-        print("hri_physio_demo: error: --seconds must be > 0", file=sys.stderr)
+    prog = ALIAS if Path(sys.argv[0]).name == ALIAS else PROG
+    try:
+        cfg = parse_options(prog, argv)
+    except ConfigError as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr, flush=True)
         return 2
-    rate = 130.0
-    dev = args.device_id
-    echo = not args.quiet_nodes
     group = ProcessGroup()
     stop = install_stop_handlers(lambda name: print(f"\n{name}: stopping the demo", flush=True))
     watcher = TopicWatcher()
-    print(f"HRI Physio demo: simulated Polar H10 '{dev}' for {args.seconds:g} s "
-          f"-> LSL -> physio_receiver -> ROS 2 {ECG_TOPIC}, {HR_TOPIC}", flush=True)
-    code = 0
+    print(f"HRI Physio demo: simulated Polar H10 '{cfg.device_id}' for {cfg.seconds:g} s "
+          f"-> LSL -> physio_receiver -> ROS 2 {POLAR_H10_ECG}, {POLAR_H10_HR}", flush=True)
+    expected = round(cfg.seconds * ECG_RATE)
+    failed: dict[str, str] = {}  # process name -> its error line
     try:
-        for stream, topic, frame, node in (("ECG", ECG_TOPIC, 13, "ecg_receiver"),
-                                           ("HR", HR_TOPIC, 1, "hr_receiver")):
-            group.start(node, "physio_receiver", [
-                "--input", f"lsl:PolarH10/{dev}/{stream}", "--output", f"ros:{topic}",
-                "--output-frame", str(frame), "--sampling-rate", str(rate if stream == "ECG" else 1.0),
-                "--resolve-timeout", "30", "--wait-for-consumers", "10",
-                "--ros-args", "-r", f"__node:={node}",
-            ], echo=echo)
-        sim = group.start("simulator", "physio_simulator", [
-            "--seconds", f"{args.seconds:g}", "--signals", "ecg,hr", "--device-id", dev,
-            "--rate", f"{rate:g}", "--bpm", f"{args.bpm:g}", "--wait-for-consumers", "30",
-        ], echo=echo)
+        sim = start_nodes(group, cfg, echo=not cfg.quiet_nodes)
         started = time.monotonic()
-        next_report = started + 2.0
-        while not stop.wait(0.1):
-            if sim.returncode is not None:
+        while not stop.is_set():
+            exited = group.wait_any_exit(REPORT_EVERY, stop=stop)
+            if exited is not None:
+                if exited.returncode != 0:
+                    failed[exited.name] = exited.error_line()
                 break
-            dead = [p for p in group.procs if p.returncode is not None]
-            if dead:
-                print(f"{dead[0].name} exited early with code {dead[0].returncode}", flush=True)
-                code = 1
-                break
-            if time.monotonic() >= next_report:
-                next_report += 2.0
-                print(f"[demo] {time.monotonic() - started:5.1f} s: ECG samples on ROS 2: "
-                      f"{watcher.ecg_samples}, HR: {watcher.hr:.0f} bpm ({watcher.hr_samples} values)",
-                      flush=True)
-        if sim.returncode not in (None, 0):
-            code = 1
-        # Let the receivers forward the tail of the stream before stopping them.
-        expected = round(args.seconds * rate)
-        deadline = time.monotonic() + 5.0
-        while watcher.ecg_samples < expected and time.monotonic() < deadline and not stop.is_set():
-            time.sleep(0.05)
+            print(f"[demo] {time.monotonic() - started:5.1f} s: ECG samples on ROS 2: {watcher.ecg_samples}, "
+                  f"HR: {watcher.hr:.0f} bpm ({watcher.hr_samples} values)", flush=True)
+        if not failed and sim.returncode == 0:
+            # Let the receivers forward the tail of the stream before stopping them.
+            wait_until(lambda: watcher.ecg_samples >= expected, 5.0, stop=stop)
     finally:
         codes = group.stop()
         time.sleep(0.3)
         watcher.close()
-    expected = round(args.seconds * rate)
+    for name, line in failed.items():
+        print(f"[demo] {name} failed (exit status {codes.get(name)}): {line}", flush=True)
+    sent = "not simulated: the simulator failed" if "simulator" in failed else f"{expected} simulated"
     print(f"[demo] done: {watcher.ecg_samples} ECG samples received on ROS 2 "
-          f"({expected} simulated at {rate:g} Hz), {watcher.hr_samples} HR values, "
+          f"({sent} at {ECG_RATE:g} Hz), {watcher.hr_samples} HR values, "
           f"timestamps strictly increasing: {watcher.ecg_counter_ok}; node exit codes {codes}", flush=True)
-    if any(c != 0 for c in codes.values()) or not watcher.ecg_counter_ok:
-        code = 1
+    if failed or any(c != 0 for c in codes.values()) or not watcher.ecg_counter_ok:
+        return 1
     if not stop.is_set() and watcher.ecg_samples != expected:
-        code = 1
-    return code
+        return 1
+    return 0
 
 
 if __name__ == "__main__":

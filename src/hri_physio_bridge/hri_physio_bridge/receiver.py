@@ -29,16 +29,26 @@ from hri_physio_bridge.frames import Frame
 from hri_physio_bridge.rate_limit import RateLimitedLog
 from hri_physio_bridge.ring_buffer import BufferClosed, Gap, OverflowPolicy, RingBuffer
 from hri_physio_bridge.streamers.base import (
+    OpenCancelled,
     Streamer,
     StreamerError,
     StreamLostError,
-    StreamNotFoundError,
+    StreamMismatchError,
     StreamSpec,
     canonical_dtype,
     numpy_dtype,
 )
 from hri_physio_bridge.streamers.csv_stream import CsvWriter
-from hri_physio_bridge.waiting import wait_for_consumers
+from hri_physio_bridge.streamers.factory import split_uri
+from hri_physio_bridge.timeline import ClockJump, RateMeter, TimelineCheck
+from hri_physio_bridge.waiting import Backoff, StreamOpener, wait_for_consumers
+
+#: The measured rate may differ from sampling_rate by this share before it is warned about.
+RATE_TOLERANCE = 0.05
+#: Seconds between two warnings about the measured rate (each says how often it was off since).
+RATE_WARNING_PERIOD = 60.0
+#: On a stop, the input is still read for what it already holds, for at most this long.
+STOP_DRAIN = 0.5
 
 
 class ReceiverConfig(NodeConfig):
@@ -84,6 +94,12 @@ class ReceiverConfig(NodeConfig):
     def _dtype(cls, value: str) -> str:
         return canonical_dtype(value)
 
+    @field_validator("input", "output")
+    @classmethod
+    def _address(cls, value: str) -> str:
+        split_uri(value)  # a known scheme and an address: checked before anything starts
+        return value
+
     @field_validator("overflow_policy")
     @classmethod
     def _policy(cls, value: str) -> str:
@@ -126,10 +142,12 @@ class ReceiverStats:
     rejected_chunks: int = 0
     publish_errors: int = 0
     gaps: list[Gap] = field(default_factory=list)
+    clock_jumps: list[ClockJump] = field(default_factory=list)
     reconnects: int = 0
     connected: bool = False
     paused: bool = False
     last_timestamp: float = math.nan
+    measured_rate: float | None = None  # from the timestamps (None until a few seconds are in)
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -145,8 +163,10 @@ class ReceiverStats:
             "publish_errors": self.publish_errors,
             "gaps": len(self.gaps),
             "missing_samples": sum(g.count for g in self.gaps),
+            "clock_jumps": len(self.clock_jumps),
             "reconnects": self.reconnects,
             "last_timestamp": self.last_timestamp,
+            "measured_rate": self.measured_rate,
         }
 
 
@@ -188,6 +208,12 @@ class PhysioReceiver:
         # every 5 s, each counted.
         self._rejections = RateLimitedLog(lambda text: self.log.error(text), monotonic=monotonic)
         self._warnings = RateLimitedLog(lambda text: self.log.warning(text), monotonic=monotonic)
+        self._rate_warnings = RateLimitedLog(lambda text: self.log.warning(text), period=RATE_WARNING_PERIOD,
+                                             monotonic=monotonic)
+        self._timeline = TimelineCheck(config.sampling_rate)
+        self._rate_meter = RateMeter()
+        self._next_rate_check = -math.inf
+        self._source_spec: StreamSpec | None = None  # what the input declared when it first opened
 
     # -- lifecycle -----------------------------------------------------------
     def open(self) -> StreamSpec:
@@ -198,6 +224,11 @@ class PhysioReceiver:
         cfg = self.config
         self.log.info(f"opening {self.source.uri} (waiting up to {cfg.resolve_timeout:g} s for it to appear)")
         spec = self.source.open_input(cfg.expected_spec(), timeout=cfg.resolve_timeout, stop=self._stop)
+        try:
+            self._check_declared(spec)
+        except StreamerError:
+            self.source.close()
+            raise
         # The configuration is the contract; the stream's own labels win when it has them.
         channels = spec.channels if len(spec.channels) == cfg.num_channels else cfg.expected_spec().channels
         out_spec = StreamSpec(
@@ -232,6 +263,34 @@ class PhysioReceiver:
             f"@ {cfg.sampling_rate:g} Hz, frames of {cfg.output_frame} (overlap {cfg.sample_overlap})"
         )
         return out_spec
+
+    def _check_declared(self, spec: StreamSpec) -> None:
+        """The input's declared rate must be sampling_rate (a stream that declares none is taken
+        with a warning); after a reconnect, the stream must be the one it was."""
+        cfg, uri = self.config, self.source.uri
+        first = self._source_spec
+        if first is not None:
+            changed = [f"{what} {new} (was {old})" for what, old, new in (
+                ("nominal rate", f"{first.nominal_rate:g} Hz", f"{spec.nominal_rate:g} Hz"),
+                ("channel count", first.channel_count, spec.channel_count),
+                ("format", first.dtype, spec.dtype),
+            ) if old != new]
+            if changed:
+                raise StreamMismatchError(f"{uri} came back as another stream: {', '.join(changed)}; "
+                                          "not mixing two streams in one output")
+            return
+        declared = spec.nominal_rate
+        if declared > 0 and not math.isclose(declared, cfg.sampling_rate, rel_tol=1e-9, abs_tol=1e-9):
+            raise StreamMismatchError(
+                f"{uri} declares a nominal rate of {declared:g} Hz but sampling_rate is "
+                f"{cfg.sampling_rate:g} Hz; set sampling_rate to {declared:g}"
+            )
+        if declared == 0 and cfg.sampling_rate > 0:
+            self.log.warning(
+                f"{uri} declares no nominal rate (irregular); gaps are judged by sampling_rate "
+                f"{cfg.sampling_rate:g} Hz and the rate measured from its timestamps is checked against it"
+            )
+        self._source_spec = spec
 
     def start(self) -> None:
         if self.buffer is None:
@@ -340,6 +399,23 @@ class PhysioReceiver:
                     return
                 continue
             self._accept(chunk)
+        self._take_what_arrived()
+
+    def _take_what_arrived(self) -> None:
+        """On a stop: what the input already holds is forwarded too (within ``STOP_DRAIN`` s)."""
+        deadline = self._monotonic() + STOP_DRAIN
+        taken = 0
+        while self._monotonic() < deadline:
+            try:
+                chunk = self.source.receive(timeout=0.0)
+            except StreamerError:
+                break  # lost or broken at the very end: what was taken stays
+            if chunk is None:
+                break
+            self._accept(chunk)
+            taken += chunk.num_samples
+        if taken:
+            self.log.info(f"stopping: took the {taken} sample(s) that had already arrived")
 
     def _accept(self, chunk: Frame) -> None:
         cfg = self.config
@@ -358,6 +434,7 @@ class PhysioReceiver:
             self.stats.logged_samples += chunk.num_samples
         self._check_values(chunk)
         self._check_continuity(chunk)
+        self._check_rate()
         with self._lock:
             self.stats.received_samples += chunk.num_samples
             self.stats.received_chunks += 1
@@ -384,36 +461,69 @@ class PhysioReceiver:
             )
 
     def _check_continuity(self, chunk: Frame) -> None:
-        """Report missing samples when the timestamps jump by more than 1.5 periods."""
-        rate = self.config.sampling_rate
-        last = self.stats.last_timestamp
-        if rate <= 0 or math.isnan(last):
-            return
-        period = 1.0 / rate
-        step = float(chunk.timestamps[0]) - last
-        if step > 1.5 * period:
-            missing = round(step * rate) - 1
-            gap = Gap(last + period, float(chunk.timestamps[0]) - period, missing, "no samples received")
+        """Gaps (missing samples) and clock jumps (the sender's clock moved): counted apart,
+        each logged at most every 5 s with how many there were since."""
+        gaps, jumps = self._timeline.check(chunk.timestamps)
+        uri = self.source.uri
+        for gap in gaps:
             self.stats.gaps.append(gap)
-            self.log.warning(
-                f"{self.source.uri}: gap of {missing} sample(s) from t={gap.first_t:.4f} "
-                f"to t={gap.last_t:.4f} ({step:.3f} s without data)"
+            self._warnings.report(
+                "gap",
+                f"{uri}: gap of {gap.count} sample(s) from t={gap.first_t:.4f} to t={gap.last_t:.4f} "
+                f"({gap.t_after - gap.t_before:.3f} s without data)",
+                "gap(s)",
+            )
+        for jump in jumps:
+            self.stats.clock_jumps.append(jump)
+            self._warnings.report("clock_jump", f"{uri}: clock jump: {jump.describe()} (not counted as "
+                                  "missing samples)", "clock jump(s)")
+        if jumps:
+            self._rate_meter.reset()  # intervals across a jump say nothing about the rate
+            self._rate_meter.add(chunk.timestamps[-1:])
+        else:
+            self._rate_meter.add(chunk.timestamps)
+
+    def _check_rate(self) -> None:
+        """Once a second: the rate measured from the timestamps, warned about when it is more than
+        5 % off sampling_rate."""
+        now = self._monotonic()
+        if now < self._next_rate_check:
+            return
+        self._next_rate_check = now + 1.0
+        measured = self._rate_meter.rate
+        with self._lock:
+            self.stats.measured_rate = measured
+        expected = self.config.sampling_rate
+        if measured is None or expected <= 0:
+            return
+        off = measured / expected - 1.0
+        if abs(off) > RATE_TOLERANCE:
+            self._rate_warnings.report(
+                "measured_rate",
+                f"{self.source.uri}: measured rate {measured:.4g} Hz is {off:+.0%} off sampling_rate "
+                f"{expected:g} Hz (median interval over the last {self._rate_meter.span:.0f} s of "
+                "timestamps); check the device and its declared rate",
+                "check(s) off",
             )
 
     def _handle_lost(self, exc: StreamerError) -> None:
         self.stats.connected = False
-        self.log.warning(f"{exc}; waiting for it to come back (data received so far is kept)")
         if not self.config.reconnect:
+            self.log.warning(f"{exc}: input lost; reconnect is off: publishing what is buffered and exiting")
             raise exc
-        while not self._stop.is_set():
-            try:
-                self.source.open_input(self.config.expected_spec(), timeout=1.0, stop=self._stop)
-            except StreamNotFoundError:
-                continue
-            self.stats.connected = True
-            self.stats.reconnects += 1
-            self.log.info(f"{self.source.uri}: reconnected")
+        self.log.warning(f"{exc}; waiting for it to come back (data received so far is kept)")
+        opener = StreamOpener(self.source, self.config.expected_spec(), timeout=1.0, retry=True,
+                              log=self.log, stop=self._stop, clock=self._monotonic,
+                              backoff=Backoff(initial=0.2, maximum=2.0))
+        try:
+            spec = opener.open()
+        except OpenCancelled:
             return
+        self._check_declared(spec)  # another rate or shape after the reconnect: fatal
+        self._rate_meter.reset()
+        self.stats.connected = True
+        self.stats.reconnects += 1
+        self.log.info(f"{self.source.uri}: reconnected")
 
     def _on_overflow(self, gap: Gap) -> None:
         """Log overflows, at most one line per policy every 5 s (every gap is kept in the stats)."""

@@ -24,11 +24,13 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, fields
-from typing import Any, Protocol
+from dataclasses import dataclass
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
+from pydantic import field_validator, model_validator
 
+from hri_physio_bridge.config import NodeConfig, option
 from hri_physio_bridge.streamers.base import StreamSpec
 
 SIGNALS = ("ecg", "ppg", "eda", "emg", "rsp", "ramp", "hr")
@@ -65,50 +67,70 @@ STREAMS: dict[str, StreamLayout] = {
 }
 
 
-@dataclass(frozen=True)
-class SimulatorConfig:
-    """Signal options; names match the seed simulator's flags."""
+class SimulatorConfig(NodeConfig):
+    """Every option of the simulator, declared once: the seed simulator's flags plus streaming options.
 
-    seconds: float = 60.0  # 0 = continuous
-    rate: float = 130.0  # Hz, the Polar H10 ECG rate
-    noise: float = 0.01
-    bpm: float = 70.0
-    scr: int = 3
-    drift: float = -0.01
-    bnum: int = 3
-    bdur: float = 1.0
-    resp: float = 15.0
-    seed: int = 42
-    segment_seconds: float = 60.0
+    ``seconds 0`` and ``continuous`` say the same thing (stream until stopped); each sets the other.
+    """
 
-    def __post_init__(self) -> None:
-        problems = []
-        if not (math.isfinite(self.seconds) and self.seconds >= 0):
-            problems.append(f"seconds must be >= 0 (0 = until stopped), got {self.seconds:g}")
-        if not (math.isfinite(self.rate) and 0 < self.rate <= MAX_RATE):
-            problems.append(f"rate must be > 0 and <= {MAX_RATE:g} Hz, got {self.rate:g}")
-        if not (math.isfinite(self.noise) and self.noise >= 0):
-            problems.append(f"noise must be >= 0, got {self.noise:g}")
-        if not 20 <= self.bpm <= 250:
-            problems.append(f"bpm must be between 20 and 250, got {self.bpm:g}")
-        if self.scr < 0:
-            problems.append(f"scr must be >= 0, got {self.scr}")
-        if not math.isfinite(self.drift):
-            problems.append(f"drift must be a finite number, got {self.drift}")
-        if self.bnum < 0:
-            problems.append(f"bnum must be >= 0, got {self.bnum}")
-        if not (math.isfinite(self.bdur) and self.bdur > 0):
-            problems.append(f"bdur must be > 0 s, got {self.bdur:g}")
-        if not 1 <= self.resp <= 60:
-            problems.append(f"resp must be between 1 and 60 breaths/min, got {self.resp:g}")
-        if not (math.isfinite(self.segment_seconds) and self.segment_seconds >= 20):
-            problems.append(f"segment_seconds must be >= 20, got {self.segment_seconds:g}")
-        if problems:
-            raise ValueError("; ".join(problems))
+    SEED_KEYS: ClassVar[tuple[str, ...]] = (
+        "seconds", "rate", "noise", "bpm", "scr", "drift", "bnum", "bdur", "resp", "seed",
+    )
 
-    @property
-    def continuous(self) -> bool:
-        return self.seconds == 0
+    seconds: float = option(60.0, "length of the simulated session (0 = until stopped)", unit="s", ge=0)
+    continuous: bool = option(False, "stream until stopped (the same as seconds 0)", switch=True)
+    rate: float = option(130.0, "sampling rate of every stream but HR (1 Hz); 130 Hz is the Polar H10 "
+                         "ECG rate", unit="Hz", gt=0, le=MAX_RATE)
+    noise: float = option(0.01, "noise amplitude", ge=0)
+    bpm: float = option(70.0, "heart rate of the ECG, HR and PPG", unit="bpm", ge=20, le=250)
+    scr: int = option(3, "skin conductance responses per simulated segment (EDA)", ge=0)
+    drift: float = option(-0.01, "EDA linear drift", unit="per s")
+    bnum: int = option(3, "EMG bursts per simulated segment", ge=0)
+    bdur: float = option(1.0, "EMG burst duration", unit="s", gt=0)
+    resp: float = option(15.0, "breathing rate (RSP)", unit="breaths/min", ge=1, le=60)
+    seed: int = option(42, "random seed (segment k of a continuous run uses seed + k)")
+    segment_seconds: float = option(60.0, "continuous or long runs: length of each generated segment",
+                                    unit="s", ge=20)
+    signals: list[str] = option(list(DEFAULT_SIGNALS),
+                                f"streams to send, a comma list from {','.join(SIGNALS)}")
+    device_id: str = option("SIM0001", "device id in the stream names (a word without '/')")
+    name_prefix: str = option("", "prefix for every stream name, e.g. for test isolation")
+    chunk: int = option(0, "samples per push (0 = about 0.1 s, 13 at 130 Hz); HR sends one at a time",
+                        unit="samples", ge=0)
+    wait_for_consumers: float = option(0.0, "wait up to this long for an inlet on every stream before "
+                                       "streaming (0 = no wait)", unit="s", ge=0)
+
+    @field_validator("signals")
+    @classmethod
+    def _signals(cls, value: list[str]) -> list[str]:
+        return list(parse_signals(value))
+
+    @field_validator("device_id")
+    @classmethod
+    def _device_id(cls, value: str) -> str:
+        value = value.strip()
+        if not value or "/" in value or any(c.isspace() for c in value):
+            raise ValueError("expected a non-empty word without '/' or spaces")
+        return value
+
+    @field_validator("name_prefix")
+    @classmethod
+    def _prefix(cls, value: str) -> str:
+        return value.strip().strip("/")
+
+    @model_validator(mode="after")
+    def _consistent(self) -> SimulatorConfig:
+        if self.continuous or self.seconds == 0:  # frozen: keep the two spellings in step
+            object.__setattr__(self, "continuous", True)
+            object.__setattr__(self, "seconds", 0.0)
+        if self.rate < MIN_NEUROKIT_RATE and NEUROKIT_SIGNALS.intersection(self.signals):
+            raise ValueError(f"rate: must be >= {MIN_NEUROKIT_RATE:g} Hz for NeuroKit2 signals "
+                             f"({', '.join(sorted(NEUROKIT_SIGNALS.intersection(self.signals)))}), "
+                             f"got {self.rate:g}")
+        if "emg" in self.signals and self.bnum * self.bdur >= self.generated_seconds:
+            raise ValueError(f"bnum, bdur: {self.bnum} EMG bursts of {self.bdur:g} s do not fit in "
+                             f"{self.generated_seconds:g} s of simulated EMG")
+        return self
 
     @property
     def generated_seconds(self) -> float:
@@ -121,6 +143,24 @@ class SimulatorConfig:
     def fs(self) -> int:
         """NeuroKit2 generates at a whole rate; timestamps still use ``rate`` exactly."""
         return max(1, round(self.rate))
+
+    @property
+    def chunk_samples(self) -> int:
+        return self.chunk or max(1, round(self.rate * 0.1))
+
+
+def parse_signals(value: Any) -> tuple[str, ...]:
+    """``"ecg,hr"`` or ``["ecg", "hr"]`` -> ``("ecg", "hr")``; unknown names are an error."""
+    items = value.split(",") if isinstance(value, str) else value
+    if not isinstance(items, Sequence):
+        raise ValueError(f"signals must be a comma list, got {value!r}")
+    names = [str(s).strip().lower() for s in items if str(s).strip()]
+    bad = [s for s in names if s not in SIGNALS]
+    if bad:
+        raise ValueError(f"unknown signal(s) {', '.join(bad)}; choose from {', '.join(SIGNALS)}")
+    if not names:
+        raise ValueError(f"no signal chosen; choose from {', '.join(SIGNALS)}")
+    return tuple(dict.fromkeys(names))  # keep order, drop repeats
 
 
 def stream_rate(signal: str, cfg: SimulatorConfig) -> float:
@@ -145,90 +185,6 @@ def stream_spec(signal: str, cfg: SimulatorConfig, device_id: str, prefix: str =
         source_id=f"{device_id}-{layout.kind}",
         channels=(layout.kind,),
     )
-
-
-# -- options (CLI / YAML) ---------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class RunOptions:
-    """Everything the node needs, validated."""
-
-    sim: SimulatorConfig = field(default_factory=SimulatorConfig)
-    signals: tuple[str, ...] = DEFAULT_SIGNALS
-    device_id: str = "SIM0001"
-    name_prefix: str = ""
-    chunk: int = 0  # 0 = about 0.1 s of samples
-    wait_for_consumers: float = 0.0
-
-    @property
-    def chunk_samples(self) -> int:
-        return self.chunk or max(1, round(self.sim.rate * 0.1))
-
-
-_SIM_KEYS = {f.name: f.type for f in fields(SimulatorConfig)}
-_RUN_KEYS = {"signals", "device_id", "name_prefix", "chunk", "wait_for_consumers", "continuous"}
-OPTION_KEYS = frozenset(_SIM_KEYS) | _RUN_KEYS
-
-
-def _number(key: str, value: Any, integer: bool = False) -> float | int:
-    if isinstance(value, bool) or not isinstance(value, (int, float, str)):
-        raise ValueError(f"option {key!r} must be a number, got {value!r}")
-    try:
-        number = float(value)
-    except ValueError:
-        raise ValueError(f"option {key!r} must be a number, got {value!r}") from None
-    if integer:
-        if not number.is_integer():
-            raise ValueError(f"option {key!r} must be a whole number, got {value!r}")
-        return int(number)
-    return number
-
-
-def parse_signals(value: Any) -> tuple[str, ...]:
-    """``"ecg,hr"`` or ``["ecg", "hr"]`` -> ``("ecg", "hr")``; unknown names are an error."""
-    items = value.split(",") if isinstance(value, str) else value
-    if not isinstance(items, Sequence):
-        raise ValueError(f"signals must be a comma list, got {value!r}")
-    names = [str(s).strip().lower() for s in items if str(s).strip()]
-    bad = [s for s in names if s not in SIGNALS]
-    if bad:
-        raise ValueError(f"unknown signal(s) {', '.join(bad)}; choose from {', '.join(SIGNALS)}")
-    if not names:
-        raise ValueError(f"no signal chosen; choose from {', '.join(SIGNALS)}")
-    return tuple(dict.fromkeys(names))  # keep order, drop repeats
-
-
-def options_from_mapping(values: Mapping[str, Any]) -> RunOptions:
-    """Validate options from YAML and/or the command line (keys use ``_`` or ``-``)."""
-    opts = {str(k).replace("-", "_"): v for k, v in values.items()}
-    unknown = sorted(set(opts) - OPTION_KEYS)
-    if unknown:
-        raise ValueError(f"unknown option(s) {', '.join(unknown)}; known: {', '.join(sorted(OPTION_KEYS))}")
-    sim = {k: _number(k, v, integer=_SIM_KEYS[k] == "int") for k, v in opts.items() if k in _SIM_KEYS}
-    continuous = opts.get("continuous", False)
-    if not isinstance(continuous, bool):
-        raise ValueError(f"option 'continuous' must be true or false, got {continuous!r}")
-    if continuous:
-        sim["seconds"] = 0.0
-    cfg = SimulatorConfig(**sim)
-    signals = parse_signals(opts.get("signals", DEFAULT_SIGNALS))
-    if cfg.rate < MIN_NEUROKIT_RATE and NEUROKIT_SIGNALS.intersection(signals):
-        raise ValueError(f"rate must be >= {MIN_NEUROKIT_RATE:g} Hz for NeuroKit2 signals, got {cfg.rate:g}")
-    if "emg" in signals and cfg.bnum * cfg.bdur >= cfg.generated_seconds:
-        raise ValueError(f"{cfg.bnum} EMG bursts of {cfg.bdur:g} s do not fit in "
-                         f"{cfg.generated_seconds:g} s of simulated EMG")
-    device_id = str(opts.get("device_id", "SIM0001")).strip()
-    if not device_id or "/" in device_id or any(c.isspace() for c in device_id):
-        raise ValueError(f"device_id must be a non-empty word without '/', got {device_id!r}")
-    chunk = _number("chunk", opts.get("chunk", 0), integer=True)
-    if chunk < 0:
-        raise ValueError(f"chunk must be >= 1 sample (0 = about 0.1 s), got {chunk}")
-    wait = _number("wait_for_consumers", opts.get("wait_for_consumers", 0.0))
-    if not (math.isfinite(wait) and wait >= 0):
-        raise ValueError(f"wait_for_consumers must be >= 0 s, got {wait:g}")
-    prefix = opts.get("name_prefix") or ""
-    return RunOptions(cfg, signals, device_id, str(prefix).strip("/"), int(chunk), float(wait))
 
 
 # -- signal generation ------------------------------------------------------------------

@@ -19,6 +19,7 @@ from mcap.reader import SeekingReader
 from mcap.records import Channel, Schema
 
 from hri_physio_bridge.bag.errors import BagError
+from hri_physio_bridge.bag.integrity import DamagedChunk, check_chunks
 from hri_physio_bridge.bag.metadata import LOST_KEY, METADATA_FILE, TopicInfo, load_metadata
 from hri_physio_bridge.bag.recovery import McapScanner, topic_info_from_channel
 
@@ -41,6 +42,8 @@ class _File:
     start_ns: int | None = None
     end_ns: int | None = None
     damage: str = ""  # incomplete files: the first damaged or cut-short record ("" if none)
+    damaged: list[DamagedChunk] | None = None  # None: not checked yet (complete files)
+    unreadable: int = 0  # messages in damaged chunks (complete files: exact, from the summary)
 
 
 def _summary(path: Path) -> _File:
@@ -79,7 +82,8 @@ def _scan(path: Path) -> _File:
         counts[channel.id] = counts.get(channel.id, 0) + 1
     rep = scanner.report
     return _File(
-        path, False, scanner.channels, scanner.schemas, counts, rep.first_ns, rep.last_ns, rep.damage
+        path, False, scanner.channels, scanner.schemas, counts, rep.first_ns, rep.last_ns, rep.damage,
+        list(rep.damaged_chunks), sum(c.messages or 0 for c in rep.damaged_chunks),
     )
 
 
@@ -167,7 +171,27 @@ class BagReader:
 
     @property
     def complete(self) -> bool:
+        """Every file has its summary (its writer finished); says nothing about damage inside."""
         return all(f.complete for f in self._files)
+
+    def damaged_chunks(self) -> list[tuple[Path, DamagedChunk]]:
+        """Every chunk that fails its CRC or cannot be decompressed, by file.
+
+        Reads every chunk of a complete file once (a scan of an incomplete one did so already).
+        """
+        out: list[tuple[Path, DamagedChunk]] = []
+        for f in self._files:
+            if f.damaged is None:
+                check = check_chunks(f.path)
+                f.damaged, f.unreadable = check.damaged, check.unreadable_messages
+            out.extend((f.path, chunk) for chunk in f.damaged)
+        return out
+
+    @property
+    def unreadable_messages(self) -> int:
+        """Messages lost in damaged chunks (after :meth:`damaged_chunks`; at least, for scanned files)."""
+        self.damaged_chunks()
+        return sum(f.unreadable for f in self._files)
 
     @property
     def message_count(self) -> int:

@@ -16,10 +16,11 @@ unless asked otherwise.
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import os
 import struct
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -27,11 +28,12 @@ from typing import Any, BinaryIO
 import yaml
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
-from mcap.records import Channel, Chunk, Message, Metadata, Schema
+from mcap.records import Channel, Chunk, Message, MessageIndex, Metadata, Schema
 from mcap.stream_reader import breakup_chunk
 from mcap.writer import CompressionType, Writer
 
 from hri_physio_bridge.bag.errors import BagError
+from hri_physio_bridge.bag.integrity import DamagedChunk, known_chunk_offsets
 from hri_physio_bridge.bag.metadata import METADATA_FILE, BagInfo, TopicInfo, write_metadata
 from hri_physio_bridge.bag.msgdefs import installed_type_hash
 from hri_physio_bridge.bag.writer import SESSION_RECORD
@@ -55,6 +57,9 @@ class ScanReport:
     # without a footer, as a killed writer's does between chunks, is not damaged).
     damage: str = ""
     damage_offset: int | None = None
+    #: Every complete but unreadable chunk, with the messages its message index says it held.
+    damaged_chunks: list[DamagedChunk] = field(default_factory=list)
+    skipped_bytes: int = 0  # broken records skipped mid-file (to a chunk the summary knows of)
 
     @property
     def lost_bytes(self) -> int:
@@ -67,10 +72,15 @@ class ScanReport:
 
 
 class McapScanner:
-    """Sequential, damage-tolerant reader of one MCAP file."""
+    """Sequential, damage-tolerant reader of one MCAP file.
 
-    def __init__(self, path: Path | str) -> None:
+    ``resume_offsets`` (where chunks start, from an intact summary) let the scan carry on after
+    a stretch of broken records instead of ending there.
+    """
+
+    def __init__(self, path: Path | str, resume_offsets: Iterable[int] = ()) -> None:
         self.path = Path(path)
+        self.resume_offsets = sorted(resume_offsets)
         self.schemas: dict[int, Schema] = {}
         self.channels: dict[int, Channel] = {}
         self.metadata: list[Metadata] = []
@@ -94,6 +104,7 @@ class McapScanner:
         self, fh: BinaryIO, offset: int, size: int
     ) -> Iterator[tuple[Channel, Schema | None, Message]]:
         rep = self.report
+        after_damaged = False  # the records just read are a damaged chunk and its message indexes
         while True:
             head = fh.read(9)
             if len(head) == 0:
@@ -105,25 +116,33 @@ class McapScanner:
                 return
             opcode, length = struct.unpack("<BQ", head)
             if offset + 9 + length > size:
-                rep.problem = (
-                    f"{_opname(opcode)} record at byte {offset} is cut short "
-                    f"({size - offset - 9} of {length} bytes)"
-                )
-                rep.note_damage(offset, rep.problem)
-                return
+                what = (f"{_opname(opcode)} record at byte {offset} is cut short "
+                        f"({size - offset - 9} of {length} bytes)")
+                resumed = self._resume(fh, offset, what)
+                if resumed is None:
+                    return
+                offset, after_damaged = resumed, False
+                continue
             body = fh.read(length)
             start, offset = offset, offset + 9 + length
+            if opcode == Opcode.MESSAGE_INDEX:
+                self._count_damaged(body, after_damaged)
+            after_damaged = after_damaged and opcode == Opcode.MESSAGE_INDEX
             try:
                 records = self._parse(opcode, body)
             except Exception as exc:
                 if opcode == Opcode.CHUNK:
                     rep.corrupt_chunks += 1
                     rep.note_damage(start, f"damaged chunk record at byte {start}: {exc}")
+                    rep.damaged_chunks.append(_damaged_chunk(start, body, exc))
+                    after_damaged = True  # its message index records follow it
                     rep.valid_bytes = offset
                     continue
-                rep.problem = f"damaged {_opname(opcode)} record at byte {start}: {exc}"
-                rep.note_damage(start, rep.problem)
-                return
+                resumed = self._resume(fh, start, f"damaged {_opname(opcode)} record at byte {start}: {exc}")
+                if resumed is None:
+                    return
+                offset = resumed
+                continue
             rep.valid_bytes = offset
             for rec in records:
                 if isinstance(rec, Schema):
@@ -153,6 +172,30 @@ class McapScanner:
                 rep.complete = True
                 return
 
+    def _resume(self, fh: BinaryIO, at: int, what: str) -> int | None:
+        """After a broken record at ``at``: the next chunk the summary knows of (seeked to), or
+        None (the scan ends there, ``what`` is the problem)."""
+        rep = self.report
+        rep.note_damage(at, what)
+        nxt = next((o for o in self.resume_offsets if o > at), None)
+        if nxt is None:
+            rep.problem = what
+            return None
+        rep.skipped_bytes += nxt - at
+        fh.seek(nxt)
+        return nxt
+
+    def _count_damaged(self, body: bytes, after_damaged: bool) -> None:
+        """Add a message index record's entries to the damaged chunk it follows."""
+        if not after_damaged:
+            return
+        try:
+            n = len(MessageIndex.read(ReadDataStream(io.BytesIO(body))).records)
+        except Exception:
+            return
+        last = self.report.damaged_chunks[-1]
+        self.report.damaged_chunks[-1] = dataclasses.replace(last, messages=(last.messages or 0) + n)
+
     @staticmethod
     def _parse(opcode: int, body: bytes) -> list[Any]:
         stream = ReadDataStream(io.BytesIO(body))
@@ -167,6 +210,17 @@ class McapScanner:
         if opcode == Opcode.METADATA:
             return [Metadata.read(stream)]
         return []
+
+
+def _damaged_chunk(offset: int, body: bytes, exc: Exception) -> DamagedChunk:
+    """A damaged chunk, with its time span if its header can still be read."""
+    start_ns = end_ns = None
+    try:
+        head = Chunk.read(ReadDataStream(io.BytesIO(body)))
+        start_ns, end_ns = head.message_start_time, head.message_end_time
+    except Exception:
+        pass
+    return DamagedChunk(offset, start_ns, end_ns, None, str(exc) or type(exc).__name__)
 
 
 def _opname(opcode: int) -> str:
@@ -221,7 +275,7 @@ def repair_bag(path: Path | str, keep_damaged: bool = True) -> RepairReport:
     mcap_path = find_mcap(path)
     bag_dir = mcap_path.parent
     tmp = mcap_path.with_suffix(".mcap.repairing")
-    scanner = McapScanner(mcap_path)
+    scanner = McapScanner(mcap_path, known_chunk_offsets(mcap_path))
     topics: dict[int, TopicInfo] = {}
     new_ids: dict[int, int] = {}
     schema_ids: dict[str, int] = {}

@@ -18,9 +18,10 @@ from typing import Any
 
 from std_msgs.msg import String
 
+from hri_physio_bridge.config import ConfigError
 from hri_physio_bridge.node_runner import ManagedNode, logic_logger, run_node
 from hri_physio_bridge.receiver import PhysioReceiver, ReceiverConfig
-from hri_physio_bridge.streamers import OpenCancelled, StreamerError, create_streamer
+from hri_physio_bridge.streamers import OpenCancelled, Streamer, StreamerError, create_streamer
 
 PROG = "physio_receiver"
 
@@ -33,8 +34,8 @@ class PhysioReceiverNode(ManagedNode):
         self.config = self.declare_config(config)
         self.status_pub = self.create_publisher(String, "~/status", 10)
         cfg = self.config
-        source = create_streamer(cfg.input, node=self, max_chunk=cfg.input_frame)
-        sink = create_streamer(cfg.output, node=self, max_chunk=cfg.output_frame)
+        source = _streamer("input", cfg.input, node=self, max_chunk=cfg.input_frame)
+        sink = _streamer("output", cfg.output, node=self, max_chunk=cfg.output_frame)
         log = logic_logger(self.get_name(), self.get_logger())
         self.receiver = PhysioReceiver(cfg, source, sink, log=log)
 
@@ -70,7 +71,8 @@ class PhysioReceiverNode(ManagedNode):
                 log.info(
                     f"received {status['received_samples']} samples, published "
                     f"{status['published_samples']} in {status['published_frames']} frames, "
-                    f"gaps {status['gaps']}, NaN/inf {status['nonfinite_samples']}, "
+                    f"gaps {status['gaps']}, clock jumps {status['clock_jumps']}, "
+                    f"NaN/inf {status['nonfinite_samples']}, "
                     f"rejected {status['rejected_messages'] + status['rejected_chunks']}"
                 )
                 next_status += period
@@ -84,6 +86,14 @@ class PhysioReceiverNode(ManagedNode):
 
     def close(self) -> None:
         self.receiver.request_stop()
+
+
+def _streamer(option: str, uri: str, **kwargs: Any) -> Streamer:
+    """The streamer for ``uri``; an address its transport refuses is a configuration error."""
+    try:
+        return create_streamer(uri, **kwargs)
+    except ValueError as exc:
+        raise ConfigError(f"{option}: {exc}") from None
 
 
 def _console(receiver: PhysioReceiver, stop: threading.Event, stream: Any = sys.stdin) -> None:

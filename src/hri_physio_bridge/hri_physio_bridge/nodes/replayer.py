@@ -1,13 +1,13 @@
-"""replayer: play a rosbag2 directory (MCAP) or a bare .mcap file back onto ROS 2.
+"""physio_replayer (alias replayer): play a rosbag2 directory (MCAP) or a bare .mcap file back onto ROS 2.
 
 Examples::
 
-    replayer bags/P012_2025_01_01-10_00_00                  # original timing
-    replayer run.mcap --rate 20 --loop                       # 20x faster, forever
-    replayer BAG --rate 0 --topics /physio/polar_h10/ecg      # as fast as possible, in order
-    replayer BAG --clock --clock-step 0.01 --start-offset 30  # drive use_sim_time nodes
-    replayer BAG --remap /physio/polar_h10/ecg:=/replay/ecg
-    replayer BAG --info
+    physio_replayer bags/P012_2025_01_01-10_00_00                  # original timing
+    physio_replayer run.mcap --rate 20 --loop                       # 20x faster, forever
+    physio_replayer BAG --rate 0 --topics /physio/polar_h10/ecg      # as fast as possible, in order
+    physio_replayer BAG --clock --clock-step 0.01 --start-offset 30  # drive use_sim_time nodes
+    physio_replayer BAG --remap /physio/polar_h10/ecg:=/replay/ecg
+    physio_replayer BAG --info
 
 Messages are published as stored (raw CDR), with each topic's recorded QoS (reliable /
 transient-local only if every recorded publisher offered it).
@@ -17,103 +17,92 @@ from __future__ import annotations
 
 import argparse
 import sys
+import threading
+from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 from hri_physio_bridge.bag.errors import BagError
+from hri_physio_bridge.bag.options import ReplayerConfig
 from hri_physio_bridge.bag.playback import NS, PlaybackOptions, Player
 from hri_physio_bridge.bag.reader import BagMessage, BagReader
-from hri_physio_bridge.bag.topics import TopicSelector, parse_remaps
-from hri_physio_bridge.nodes.common import fail, install_stop_handlers, split_ros_args
+from hri_physio_bridge.bag.topics import TopicSelector
+from hri_physio_bridge.node_runner import ManagedNode, run_node
+from hri_physio_bridge.waiting import wait_until
 
-PROG = "replayer"
-
-
-def _number(low: float, strict: bool) -> Any:
-    def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-        if value < low or (strict and value == low):
-            raise argparse.ArgumentTypeError(f"must be {'>' if strict else '>='} {low:g}, got {text}")
-        return value
-
-    return parse
+PROG = "physio_replayer"
+#: The older, shorter name of the same command (kept: users and scripts type it).
+ALIAS = "replayer"
+#: rcl takes any ``a:=b`` outside ``--ros-args`` for a (deprecated) remapping of its own. The
+#: values of --remap are ours: they reach the option parser spelled ``a=>b`` and are turned back.
+_REMAP_IN_TRANSIT = "=>"
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog=PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+def _keep_remaps_from_rcl(argv: list[str]) -> list[str]:
+    out, in_remap = list(argv), False
+    for i, token in enumerate(out):
+        if token == "--ros-args":
+            break
+        if token.startswith("-"):
+            in_remap = token == "--remap"
+        elif in_remap:
+            out[i] = token.replace(":=", _REMAP_IN_TRANSIT)
+    return out
+
+
+def _arguments(p: argparse.ArgumentParser) -> None:
+    """The bag, the --info mode (no ROS), and the options written their own way on the command line."""
     p.add_argument("bag", help="rosbag2 directory or .mcap file")
-    p.add_argument(
-        "-r",
-        "--rate",
-        type=_number(0, False),
-        default=1.0,
-        help="speed factor (default 1; 0 = as fast as possible, order kept)",
-    )
-    p.add_argument("-l", "--loop", action="store_true", help="start again at the end, until stopped")
-    p.add_argument("--topics", nargs="+", default=[], metavar="TOPIC", help="play only these topics")
-    p.add_argument("-e", "--regex", help="play only topics whose full name matches (with --topics: either)")
-    p.add_argument("-x", "--exclude", help="never play topics whose full name matches")
-    p.add_argument("--remap", nargs="+", default=[], metavar="FROM:=TO", help="publish topic FROM as TO")
-    p.add_argument(
-        "--start-offset",
-        type=_number(0, False),
-        default=0.0,
-        help="skip the first SECONDS of the bag (default 0)",
-    )
-    p.add_argument(
-        "--clock", action="store_true", help="publish /clock from the bag's time (for use_sim_time)"
-    )
-    p.add_argument(
-        "--clock-step",
-        type=_number(0, True),
-        default=0.01,
-        help="bag seconds between /clock messages; keep it <= the shortest timer period of "
-        "the nodes on sim time (default 0.01)",
-    )
-    p.add_argument(
-        "--skip-unknown",
-        action="store_true",
-        help="leave out topics whose message type is not installed (default: refuse to play)",
-    )
-    p.add_argument(
-        "--wait-for-subscribers",
-        type=_number(0, False),
-        default=0.0,
-        metavar="SECONDS",
-        help="wait up to SECONDS for a subscriber on every played topic before starting",
-    )
-    p.add_argument("--delay", type=_number(0, False), default=0.0, help="seconds to sleep before playing")
-    p.add_argument("--qos-depth", type=int, default=1000, help="publisher queue depth (default 1000)")
-    p.add_argument("--info", action="store_true", help="print what the bag holds and exit")
-    return p
+    p.add_argument("--info", action="store_true",
+                   help="print what the bag holds (checking every chunk's CRC) and exit")
+    also = "; also a --conf key and ROS parameter"
+    p.add_argument("-r", "--rate", dest="rate", default=None, metavar="NUM",
+                   help=ReplayerConfig.describe("rate") + also)
+    p.add_argument("-l", "--loop", dest="loop", action="store_const", const=True, default=None,
+                   help=ReplayerConfig.describe("loop") + also)
+    p.add_argument("-e", "--regex", dest="regex", default=None, metavar="REGEX",
+                   help=ReplayerConfig.describe("regex") + also)
+    p.add_argument("-x", "--exclude", dest="exclude", default=None, metavar="REGEX",
+                   help=ReplayerConfig.describe("exclude") + also)
+    p.add_argument("--topics", dest="topics", nargs="+", default=None, metavar="TOPIC",
+                   help=ReplayerConfig.describe("topics") + also)
+    p.add_argument("--remap", dest="remap", nargs="+", default=None, metavar="FROM:=TO",
+                   type=lambda text: text.replace(_REMAP_IN_TRANSIT, ":="),
+                   help=ReplayerConfig.describe("remap") + also)
 
 
-def print_info(bag: BagReader) -> None:
+def print_info(bag: BagReader, prog: str = PROG) -> None:
+    """What the bag holds, and whether all of it can be read back: every chunk's CRC is checked."""
     start, end = bag.start_ns, bag.end_ns
     duration = (end - start) / NS if start is not None and end is not None else 0.0
+    damaged = bag.damaged_chunks()
+    problems = [] if bag.complete else ["recorder did not finish"]
+    if damaged:
+        at_least = "at least " if any(c.messages is None for _, c in damaged) and not bag.complete else ""
+        problems.append(f"{len(damaged)} damaged chunk(s) holding {at_least}{bag.unreadable_messages} "
+                        f"message(s); playback {'stops at the first' if bag.complete else 'skips them'}, "
+                        "'physio_recorder --repair' keeps the rest")
     print(f"bag:       {bag.path}")
-    print(f"complete:  {'yes' if bag.complete else 'no (recorder did not finish)'}")
+    print(f"complete:  {'no (' + '; '.join(problems) + ')' if problems else 'yes'}")
     print(f"duration:  {duration:.3f} s")
     print(f"start:     {start} ns" if start is not None else "start:     -")
     print(f"messages:  {bag.message_count}")
     for t in bag.topics.values():
         print(f"  {t.name} [{t.type}] {t.message_count} msgs, hash {t.type_description_hash or '-'}")
+    for path, chunk in damaged:
+        print(f"damaged:   {path.name}: {chunk.describe()}")
     for key, value in bag.custom_data.items():
         print(f"custom:    {key}: {value}")
 
 
-def select(bag: BagReader, args: argparse.Namespace) -> dict[str, Any]:
+def select(bag: BagReader, cfg: ReplayerConfig, warn: Callable[[str], None]) -> dict[str, Any]:
     """Topics to play and their Python classes; unknown types fail unless --skip-unknown."""
     from hri_physio_bridge.bag.msgdefs import UnknownTypeError, import_message_type
 
     if bag.message_count == 0:
         raise BagError(f"{bag.path}: the bag holds no messages (empty bag)")
-    selector = TopicSelector(args.topics, args.regex, args.exclude, include_hidden=True)
-    missing = [t for t in args.topics if t not in bag.topics]
+    selector = TopicSelector(cfg.topics, cfg.regex or None, cfg.exclude or None, include_hidden=True)
+    missing = [t for t in cfg.topics if t not in bag.topics]
     if missing:
         raise BagError(f"topic(s) {missing} not in the bag; it holds {sorted(bag.topics)}")
     chosen = {name: info for name, info in bag.topics.items() if selector.selects(name)}
@@ -126,78 +115,45 @@ def select(bag: BagReader, args: argparse.Namespace) -> dict[str, Any]:
             classes[name] = import_message_type(info.type)
         except UnknownTypeError:
             unknown.append(f"{name} [{info.type}]")
-    if unknown and not args.skip_unknown:
+    if unknown and not cfg.skip_unknown:
         raise BagError(
             f"message type(s) not installed for {', '.join(unknown)}; install them, leave the "
             "topics out (--exclude) or pass --skip-unknown"
         )
     for item in unknown:
-        print(f"{PROG}: warning: skipping {item}: message type not installed", file=sys.stderr)
+        warn(f"skipping {item}: message type not installed")
     if not classes or sum(bag.topics[t].message_count for t in classes) == 0:
         raise BagError(f"{bag.path}: the bag has no messages on the selected topics (empty bag)")
     return classes
 
 
-def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    ours, ros_args = split_ros_args(argv)
-    args = build_parser().parse_args(ours)
-    if args.qos_depth < 1:
-        fail(PROG, f"--qos-depth must be >= 1, got {args.qos_depth}")
-    try:
-        bag = BagReader(args.bag)
-        for warning in bag.warnings:
-            print(f"{PROG}: warning: {warning}", file=sys.stderr)
-        if args.info:
-            print_info(bag)
-            return 0
-        remaps = parse_remaps(args.remap)
-        classes = select(bag, args)
+class ReplayerNode(ManagedNode):
+    """Publishes a bag's messages on their recorded topics (or remapped), on schedule."""
+
+    def __init__(self, config: ReplayerConfig, bag: BagReader, **kwargs: Any) -> None:
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+        from rosgraph_msgs.msg import Clock
+
+        from hri_physio_bridge.bag.qos import adapted_qos
+
+        super().__init__(PROG, **kwargs)
+        self.config = cfg = self.declare_config(config)
+        self.bag = bag
+        self.remaps = cfg.remaps()
+        self.classes = select(bag, cfg, self.get_logger().warning)
         assert bag.start_ns is not None and bag.end_ns is not None
-        start_ns = bag.start_ns + round(args.start_offset * NS)
-        if start_ns > bag.end_ns:
+        self.start_ns = bag.start_ns + round(cfg.start_offset * NS)
+        if self.start_ns > bag.end_ns:
             raise BagError(
-                f"--start-offset {args.start_offset:g} s is past the bag's end "
+                f"start_offset {cfg.start_offset:g} s is past the bag's end "
                 f"({(bag.end_ns - bag.start_ns) / NS:.3f} s)"
             )
-        options = PlaybackOptions(
-            rate=args.rate, loop=args.loop, clock_step_ns=round(args.clock_step * NS) if args.clock else None
+        self.options = PlaybackOptions(
+            rate=cfg.rate, loop=cfg.loop, clock_step_ns=round(cfg.clock_step * NS) if cfg.clock else None
         )
-    except BagError as exc:
-        fail(PROG, str(exc))
-    return _play(args, ros_args, bag, classes, remaps, start_ns, options)
-
-
-def _play(
-    args: argparse.Namespace,
-    ros_args: list[str],
-    bag: BagReader,
-    classes: dict[str, Any],
-    remaps: dict[str, str],
-    start_ns: int,
-    options: PlaybackOptions,
-) -> int:
-    import time
-
-    import rclpy
-    from builtin_interfaces.msg import Time
-    from rclpy.duration import Duration
-    from rclpy.node import Node
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-    from rclpy.signals import SignalHandlerOptions
-    from rosgraph_msgs.msg import Clock
-
-    from hri_physio_bridge.bag.qos import adapted_qos
-
-    rclpy.init(args=[PROG, *ros_args], signal_handler_options=SignalHandlerOptions.NO)
-    node = Node(PROG, start_parameter_services=False)
-    log = node.get_logger()
-    stop = install_stop_handlers(lambda name: log.info(f"{name} received: stopping playback"))
-    code = 0
-    try:
-        pubs: dict[str, Any] = {}
-        for topic, cls in classes.items():
-            q = adapted_qos(bag.topics[topic].offered_qos_profiles, args.qos_depth)
+        self.pubs: dict[str, Any] = {}
+        for topic, cls in self.classes.items():
+            q = adapted_qos(bag.topics[topic].offered_qos_profiles, cfg.qos_depth)
             qos = QoSProfile(
                 depth=q["depth"],
                 reliability=ReliabilityPolicy.RELIABLE
@@ -207,41 +163,46 @@ def _play(
                 if q["durability"] == "transient_local"
                 else DurabilityPolicy.VOLATILE,
             )
-            pubs[topic] = node.create_publisher(cls, remaps.get(topic, topic), qos)
-        clock_pub = node.create_publisher(Clock, "/clock", 100) if options.clock_step_ns else None
+            self.pubs[topic] = self.create_publisher(cls, self.remaps.get(topic, topic), qos)
+        self.clock_pub = self.create_publisher(Clock, "/clock", 100) if self.options.clock_step_ns else None
 
-        def publish(msg: BagMessage) -> None:
-            pubs[msg.topic].publish(msg.data)
+    def on_stop(self, signal_name: str) -> None:
+        self.get_logger().info(f"{signal_name} received: stopping playback")
 
-        def publish_clock(t_ns: int) -> None:
-            assert clock_pub is not None
-            clock_pub.publish(Clock(clock=Time(sec=t_ns // NS, nanosec=t_ns % NS)))
+    def _publish(self, msg: BagMessage) -> None:
+        self.pubs[msg.topic].publish(msg.data)
 
-        if args.wait_for_subscribers > 0:
-            deadline = time.monotonic() + args.wait_for_subscribers
-            while not stop.is_set() and time.monotonic() < deadline:
-                if all(p.get_subscription_count() > 0 for p in pubs.values()):
-                    break
-                time.sleep(0.05)
-            else:
-                lonely = [p.topic_name for p in pubs.values() if p.get_subscription_count() == 0]
-                if lonely:
-                    log.warning(
-                        f"no subscriber after {args.wait_for_subscribers:g} s on {lonely}; playing anyway"
-                    )
-        if args.delay and stop.wait(args.delay):
+    def _publish_clock(self, t_ns: int) -> None:
+        from builtin_interfaces.msg import Time
+        from rosgraph_msgs.msg import Clock
+
+        assert self.clock_pub is not None
+        self.clock_pub.publish(Clock(clock=Time(sec=t_ns // NS, nanosec=t_ns % NS)))
+
+    def run(self, stop: threading.Event) -> int:
+        from rclpy.duration import Duration
+
+        cfg, bag, log, pubs = self.config, self.bag, self.get_logger(), self.pubs
+        if cfg.wait_for_subscribers > 0:
+            everyone = wait_until(lambda: all(p.get_subscription_count() > 0 for p in pubs.values()),
+                                  cfg.wait_for_subscribers, stop=stop)
+            lonely = [p.topic_name for p in pubs.values() if p.get_subscription_count() == 0]
+            if not everyone and not stop.is_set() and lonely:
+                log.warning(f"no subscriber after {cfg.wait_for_subscribers:g} s on {lonely}; playing anyway")
+        if stop.is_set() or (cfg.delay and stop.wait(cfg.delay)):
             return 0
-        total = sum(bag.topics[t].message_count for t in classes)
+        options = self.options
+        total = sum(bag.topics[t].message_count for t in self.classes)
         log.info(
             f"playing {bag.path}: {len(pubs)} topic(s), {total} messages, rate "
             f"{'max' if options.rate == 0 else f'{options.rate:g}x'}{', loop' if options.loop else ''}"
-            f"{', /clock' if clock_pub else ''}"
+            f"{', /clock' if self.clock_pub else ''}"
         )
         player = Player(
-            lambda: bag.messages(classes.keys(), start_ns),
-            publish,
+            lambda: bag.messages(self.classes.keys(), self.start_ns),
+            self._publish,
             options,
-            publish_clock=publish_clock if clock_pub else None,
+            publish_clock=self._publish_clock if self.clock_pub else None,
             stop=stop,
         )
         try:
@@ -253,16 +214,36 @@ def _play(
             pub.wait_for_all_acked(Duration(seconds=2.0))
         log.info(
             f"played {stats.messages} messages in {stats.passes} pass(es)"
-            f"{f', {stats.clock_ticks} clock ticks' if clock_pub else ''}"
+            f"{f', {stats.clock_ticks} clock ticks' if self.clock_pub else ''}"
             f"{' (stopped)' if stats.stopped else ''}; max lateness {stats.max_lateness * 1e3:.1f} ms"
         )
         for topic, n in sorted(stats.per_topic.items()):
-            log.info(f"  {topic}{' -> ' + remaps[topic] if topic in remaps else ''}: {n}")
-    finally:
-        node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
-    return code
+            log.info(f"  {topic}{' -> ' + self.remaps[topic] if topic in self.remaps else ''}: {n}")
+        return 0
+
+
+def _prog() -> str:
+    return ALIAS if Path(sys.argv[0]).name == ALIAS else PROG
+
+
+def main(argv: list[str] | None = None) -> int:
+    prog = _prog()
+
+    def open_bag(_config: ReplayerConfig, args: argparse.Namespace) -> int | None:
+        """Before ROS starts: open the bag (errors are one line), and answer --info."""
+        args.reader = BagReader(args.bag)
+        for warning in args.reader.warnings:
+            print(f"{prog}: warning: {warning}", file=sys.stderr)
+        if args.info:
+            print_info(args.reader, prog)
+            return 0
+        return None
+
+    argv = _keep_remaps_from_rcl(sys.argv[1:] if argv is None else argv)
+    return run_node(
+        prog, ReplayerConfig, lambda config, args: ReplayerNode(config, args.reader), argv=argv,
+        description=__doc__, extra_arguments=_arguments, startup_errors=(BagError,), offline=open_bag,
+    )
 
 
 if __name__ == "__main__":

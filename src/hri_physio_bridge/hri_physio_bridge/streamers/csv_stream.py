@@ -15,10 +15,12 @@ import csv
 import io
 import math
 import os
+import re
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 
@@ -34,6 +36,38 @@ from hri_physio_bridge.streamers.base import (
 )
 
 _QUERY_KEYS = {"rate", "dtype"}
+#: Splits after a carriage return that ends a line on its own (files written with CR line ends).
+_LONE_CR = re.compile(rb"(?<=\r)(?!\n)")
+
+
+class _Lines:
+    """The text lines of a CSV file, decoded one by one as UTF-8, counted.
+
+    A line that is not UTF-8 raises :class:`StreamMismatchError` naming the file and the line;
+    every line before it has been handed out.
+    """
+
+    def __init__(self, fh: BinaryIO, path: Path) -> None:
+        self.path = path
+        self.number = 0  # of the last line handed out (1 = the header)
+        self._lines = self._decode(fh)
+
+    def _decode(self, fh: BinaryIO) -> Iterator[str]:
+        for raw in fh:
+            for piece in _LONE_CR.split(raw) if b"\r" in raw[:-2] else (raw,):
+                if not piece:
+                    continue
+                self.number += 1
+                try:
+                    yield piece.decode("utf-8")
+                except UnicodeDecodeError as exc:
+                    raise StreamMismatchError(
+                        f"{self.path}:{self.number}: not UTF-8 text ({exc.reason} at byte {exc.start + 1} "
+                        "of the line); save the file as UTF-8"
+                    ) from None
+
+    def __iter__(self) -> Iterator[str]:
+        return self._lines
 
 
 def parse_csv_address(address: str) -> tuple[Path, dict[str, str]]:
@@ -107,11 +141,12 @@ class CsvStreamer(Streamer):
         self.max_chunk = int(max_chunk)
         self._monotonic = monotonic
         self._sleep = sleep
-        self._reader = None
-        self._file: io.TextIOWrapper | None = None
+        self._reader: Iterator[list[str]] | None = None
+        self._lines: _Lines | None = None
+        self._file: BinaryIO | None = None
         self._writer: CsvWriter | None = None
         self._t0: tuple[float, float] | None = None  # (first source t, wall start)
-        self._line = 1
+        self._error: StreamMismatchError | None = None  # found after good rows: raised on the next call
         self.exhausted = False
 
     # -- input ---------------------------------------------------------------
@@ -125,9 +160,15 @@ class CsvStreamer(Streamer):
         self.close()
         if not self.path.is_file():
             raise StreamNotFoundError(f"CSV file {self.path} does not exist")
-        self._file = open(self.path, newline="", encoding="utf-8")  # noqa: SIM115
-        self._reader = csv.reader(self._file)
-        header = next(self._reader, None)
+        self._file = open(self.path, "rb")  # noqa: SIM115
+        self._lines = _Lines(self._file, self.path)
+        self._reader = csv.reader(self._lines)
+        try:
+            header = next(self._reader, None)
+        except (StreamMismatchError, csv.Error) as exc:
+            self.close()
+            raise StreamMismatchError(str(exc) if isinstance(exc, StreamMismatchError)
+                                      else f"{self.path}:1: {exc}") from None
         if not header or header[0].strip() != TIME_LABEL:
             self.close()
             raise StreamMismatchError(
@@ -156,40 +197,57 @@ class CsvStreamer(Streamer):
         self._np_dtype = numpy_dtype(dtype)
         self.exhausted = False
         self._t0 = None
-        self._line = 1
+        self._error = None
         return spec
 
     def receive(self, timeout: float = 0.1) -> Frame | None:
-        if self._reader is None or self.spec is None:
+        """The next rows (up to ``max_chunk``). A bad row is an error naming its line, raised once
+        the good rows before it have been returned."""
+        if self._reader is None or self._lines is None or self.spec is None:
             raise StreamerError(f"{self.uri} is not open as an input")
-        rows: list[list[str]] = []
-        for row in self._reader:
-            self._line += 1
-            if not row:
-                continue
-            if len(row) != self.spec.channel_count + 1:
-                raise StreamMismatchError(
-                    f"{self.path}:{self._line}: expected {self.spec.channel_count + 1} columns, "
-                    f"got {len(row)}"
-                )
-            rows.append(row)
-            if len(rows) >= self.max_chunk:
-                break
-        if not rows:
+        if self._error is not None:
+            raise self._error
+        stamps: list[float] = []
+        values: list[list[float]] | list[list[str]] = []
+        try:
+            for row in self._reader:
+                if not row:
+                    continue
+                stamp, value = self._parse(row, self._lines.number)
+                stamps.append(stamp)
+                values.append(value)
+                if len(stamps) >= self.max_chunk:
+                    break
+        except StreamMismatchError as exc:
+            self._error = exc
+        except csv.Error as exc:
+            self._error = StreamMismatchError(f"{self.path}:{self._lines.number}: {exc}")
+        if not stamps:
+            if self._error is not None:
+                raise self._error
             self.exhausted = True
             return None
-        try:
-            stamps = np.array([float(r[0]) for r in rows])
-            if self.spec.is_string:
-                values = np.array([r[1:] for r in rows], dtype=object)
-            else:
-                values = np.array([[float(v) for v in r[1:]] for r in rows]).astype(self._np_dtype)
-        except ValueError as exc:
+        if self.spec.is_string:
+            array = np.array(values, dtype=object)
+        else:
+            array = np.array(values, dtype=np.float64).astype(self._np_dtype)
+        t = np.array(stamps, dtype=np.float64)
+        self._pace(t[-1], timeout)
+        return Frame(t, array, self.spec.channels)
+
+    def _parse(self, row: list[str], line: int) -> tuple[float, list]:
+        assert self.spec is not None
+        if len(row) != self.spec.channel_count + 1:
             raise StreamMismatchError(
-                f"{self.path} near line {self._line}: not a number ({exc})"
-            ) from exc
-        self._pace(stamps[-1], timeout)
-        return Frame(stamps, values, self.spec.channels)
+                f"{self.path}:{line}: expected {self.spec.channel_count + 1} columns, got {len(row)}"
+            )
+        try:
+            stamp = float(row[0])
+            if self.spec.is_string:
+                return stamp, row[1:]
+            return stamp, [float(v) for v in row[1:]]
+        except ValueError as exc:
+            raise StreamMismatchError(f"{self.path}:{line}: not a number ({exc})") from None
 
     def _pace(self, t_source: float, timeout: float) -> None:
         """Hold the chunk back until its last sample is due at the replay rate."""
@@ -222,3 +280,4 @@ class CsvStreamer(Streamer):
             self._file.close()
             self._file = None
             self._reader = None
+            self._lines = None

@@ -29,6 +29,7 @@ from hri_physio_bridge.streamers.base import (
     numpy_dtype,
     split_address,
 )
+from hri_physio_bridge.waiting import wait_until
 
 _TO_LSL = {
     "float64": pylsl.cf_double64,
@@ -109,19 +110,23 @@ class LslStreamer(Streamer):
         stays in Python, so a signal handler (Ctrl-C) runs at once. (Short blocking resolves
         are no substitute: with liblsl 1.18 a 0.5 s resolve_bypred sometimes takes 5.5 s.)
         """
-        deadline = time.monotonic() + timeout
-        resolver = pylsl.ContinuousResolver(pred=self._predicate())
-        while True:
+        held = [pylsl.ContinuousResolver(pred=self._predicate())]
+        found: list[pylsl.StreamInfo] = []
+
+        def stopped_or_appeared() -> bool:
             if stop is not None and stop.is_set():
-                raise OpenCancelled(f"stopped while waiting for LSL stream {self._predicate()}")
-            infos = resolver.results()
-            if infos:
-                return infos[0]
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                break
-            time.sleep(min(RESOLVE_POLL, remaining))
-        del resolver
+                return True
+            found[:] = held[0].results()
+            return bool(found)
+
+        wait_until(stopped_or_appeared, timeout, stop=stop, poll=RESOLVE_POLL)
+        # liblsl may block for seconds destroying a resolver in the middle of a query wave: let a
+        # daemon thread drop it, so a stop (or the error below) is never held up by that.
+        threading.Thread(target=held.clear, name="lsl-resolver-release", daemon=True).start()
+        if stop is not None and stop.is_set():
+            raise OpenCancelled(f"stopped while waiting for LSL stream {self._predicate()}")
+        if found:
+            return found[0]
         seen = pylsl.resolve_streams(wait_time=min(1.0, max(timeout, 0.2)))
         listing = "; ".join(describe_stream(i) for i in seen) or "none"
         raise StreamNotFoundError(
