@@ -61,7 +61,7 @@ def test_every_line_sent_is_a_typed_command_written_by_to_line() -> None:
     gestures = [parse_command(line) for line in run.lines if line.startswith("set gesture")]
     assert SetGesture("base", 0.5) in gestures and SetGesture("marching", 1.0) in gestures
     audio = {parse_command(line) for line in run.lines if line.startswith("set audio")}
-    assert SetAudio("./audio/exercise_135.wav") in audio  # the top of the ladder
+    assert SetAudio("beat:135") in audio  # the top of the ladder, the audio streamer's built-in beat
     assert not run.of("command_failed")
 
 

@@ -383,16 +383,16 @@ def expected_gestures() -> list[tuple[str, float]]:
 
 def expected_audio() -> list[str]:
     tempo = [115, 120, 125, 130, 135] + [135] * 9 + [130, 125, 120, 115, 115, 110]
-    return ["./audio/relaxing.wav"] + [f"./audio/exercise_{t}.wav" for t in tempo] + ["./audio/relaxing.wav"]
+    return ["relaxing"] + [f"beat:{t}" for t in tempo] + ["relaxing"]  # the packaged built-in sources
 
 
 def expected_videos() -> list[str]:
     videos = ["marching", "step_up", "marching", "lateral", "marching", "arms_forward", "marching", "lateral",
               "marching", "step_up", "marching"]
-    out = ["./video/relaxing.mp4", "./video/splash.mp4"]
+    out = ["relaxing", "splash"]
     for v in videos:
-        out += [f"./video/{v}.mp4", "./video/splash.mp4"]
-    return [*out, "./video/splash.mp4"]
+        out += [v, "splash"]
+    return [*out, "splash"]
 
 
 def test_whole_session_under_sim_time_with_the_robot_side(probe: Probe) -> None:
@@ -501,5 +501,5 @@ def test_whole_session_under_sim_time_with_the_robot_side(probe: Probe) -> None:
     assert "85.4" in announcement and "125.2" in announcement and "155.1" in announcement
     assert "QT/happy" in {e["name"] for e in probe.events("emotion_started", "mock")}
     # The robot acted on ROS time: the warm-up's first video within a few sim seconds of 180 s.
-    first_video = next(e for e in probe.events("video", "mock") if e["name"] == "./video/marching.mp4")
+    first_video = next(e for e in probe.events("video", "mock") if e["name"] == "marching")
     assert 0.0 <= first_video["t"] - (t0 + WARM) < 10.0

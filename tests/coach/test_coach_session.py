@@ -26,6 +26,11 @@ ACTIVITIES = [
 HrFn = Callable[[float, "ExerciseCoach"], float | None]
 
 
+#: Media as in the thesis: one file per tempo (the packaged default names built-in sources instead).
+THESIS_FILES = {"audio_path": "./audio/{}.wav", "video_path": "./video/{}.mp4",
+                "audio_exercise_base": "exercise_{}"}
+
+
 class Session:
     """Runs a coach on a fake clock, with one HR sample per second (at t + 0.5)."""
 
@@ -36,7 +41,7 @@ class Session:
         self.commands: list[tuple[float, str]] = []
         self.hr = hr
         self.step = step
-        cfg = CoachConfig(**{"part_age": 33.0, **config})
+        cfg = CoachConfig(**{"part_age": 33.0, **THESIS_FILES, **config})
 
         def record(line: str) -> None:
             self.commands.append((self.coach.engine.now, line))

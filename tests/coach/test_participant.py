@@ -187,3 +187,26 @@ def test_robot_commands_set_the_activity() -> None:
     assert not obs.observe("set gesture")  # malformed: ignored, remembered
     assert obs.ignored == ["set gesture"]
     assert obs.observe("set gesture wave 1.0") and obs.activity.name == "rest"
+
+
+def test_the_tempo_heard_is_the_one_the_audio_streamer_reports_playing() -> None:
+    obs = RobotObserver()
+    assert obs.observe("set audio beat:130") and obs.activity.tempo_bpm == 130.0  # no streamer heard yet
+    assert obs.observe_audio_status({"state": "playing", "source": "beat:115", "tempo": 115.0})
+    assert obs.hears_streamer and obs.activity.tempo_bpm == 115.0
+    assert not obs.observe("set audio beat:135")  # asked for, not (yet) playing: the person hears 115
+    assert obs.activity.tempo_bpm == 115.0
+    # While fading, the incoming track; a plain file's tempo comes from its name.
+    assert obs.observe_audio_status({"state": "fading", "source": "beat:135", "tempo": 135.0})
+    assert obs.observe_audio_status({"state": "playing", "source": "./audio/exercise_125.wav",
+                                     "kind": "file"})
+    assert obs.activity.tempo_bpm == 125.0
+    # An error status still describes what plays; silence and a pad without tempo keep the last one.
+    assert not obs.observe_audio_status({"state": "error", "source": "./audio/exercise_125.wav",
+                                         "error": "bad file", "request": "x.wav"})
+    assert not obs.observe_audio_status({"state": "stopped"})
+    assert not obs.observe_audio_status({"state": "playing", "source": "relaxing", "kind": "relaxing"})
+    assert obs.activity.tempo_bpm == 125.0
+    for bad in ({"state": "playing", "tempo": "fast"}, {"state": "playing", "tempo": True}, {}, {"state": 3}):
+        assert not obs.observe_audio_status(bad)
+    assert obs.activity.tempo_bpm == 125.0

@@ -111,6 +111,17 @@ def test_sigint_stops_every_node_and_leaves_a_bag_a_summary_and_a_report(short_s
     kinds = [e["event"] for e in coach]
     assert kinds[0] == "session_start" and "session_end" not in kinds and "session_stopped" in kinds
     assert summary["session"]["rule_updates"] == kinds.count("rule_update")
+    # The streamers played what the coach asked for, on the session's clock, and the bag shows it.
+    audio = [json.loads(m.data) for m in msgs["/audio_streamer/status"]]
+    assert any(a["state"] == "playing" and a["source"] == "relaxing" and a["sink"] == "null" for a in audio)
+    video = [json.loads(m.data) for m in msgs["/video_streamer/status"]]
+    assert any(v["state"] == "playing" and v["display"] == "offscreen" for v in video)
+    previews = msgs["/video_streamer/preview"]
+    assert previews and previews[0].format.lower().startswith("jp")
+    mock = [json.loads(m.data) for m in msgs["/qt_robot/mock/events"]]
+    assert not [e for e in mock if e["event"] in ("audio", "video")]  # no longer mirrored by the mock
+    for node in ("audio_streamer", "video_streamer"):
+        assert (folder / "configs" / f"{node}.yaml").is_file() and summary["nodes"][node]["exit_status"] == 0
     report = json.loads((folder / "report.json").read_text())  # the report of what ran
     zone = next(e for e in coach if e["event"] == "zone")
     assert report["hr_rest"] == pytest.approx(zone["hr_rest"], abs=0.01)

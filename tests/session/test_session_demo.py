@@ -19,7 +19,8 @@ import yaml
 pytestmark = [pytest.mark.integration, pytest.mark.ros, pytest.mark.lsl]
 
 ROOT = Path(__file__).resolve().parents[2]
-NODES = ("physio_recorder", "mock_qt_robot", "qt_controller", "simulated_participant", "hr_receiver",
+NODES = ("physio_recorder", "mock_qt_robot", "qt_controller", "audio_streamer", "video_streamer",
+         "simulated_participant", "hr_receiver",
          "ecg_receiver", "neurokit_processor", "qt_physio_coach")
 Run: TypeAlias = subprocess.CompletedProcess[str]
 #: The gestures of the thesis routine, in order (calibration's base gesture first).

@@ -13,12 +13,15 @@ from hri_physio_bridge.config import ConfigError, load_yaml
 from hri_physio_coach.session_folder import SessionFolder
 from hri_physio_coach.session_options import SessionConfig
 from hri_physio_coach.session_plan import (
+    AUDIO,
     COACH,
     ECG_RECEIVER,
     HR_RECEIVER,
     PARTICIPANT,
+    POLAR_STREAMER,
     PROCESSOR,
     RECORDER,
+    VIDEO,
     coach_config,
     plan_session,
 )
@@ -34,11 +37,12 @@ def plan(tmp_path: Path, **options):
 
 def test_every_node_in_start_order_recorder_first_coach_last(tmp_path: Path) -> None:
     p, _ = plan(tmp_path)
-    assert [n.name for n in p.nodes] == [RECORDER, "mock_qt_robot", "qt_controller", PARTICIPANT, HR_RECEIVER,
-                                         ECG_RECEIVER, PROCESSOR, COACH]
+    assert [n.name for n in p.nodes] == [RECORDER, "mock_qt_robot", "qt_controller", AUDIO, VIDEO,
+                                         PARTICIPANT, HR_RECEIVER, ECG_RECEIVER, PROCESSOR, COACH]
     assert p.routine_duration == 1380.0  # the packaged 23-minute routine
     p, _ = plan(tmp_path, no_record=True, no_ecg=True)
-    assert [n.name for n in p.nodes] == ["mock_qt_robot", "qt_controller", PARTICIPANT, HR_RECEIVER, COACH]
+    assert [n.name for n in p.nodes] == ["mock_qt_robot", "qt_controller", AUDIO, VIDEO, PARTICIPANT,
+                                         HR_RECEIVER, COACH]
 
 
 def test_saved_configurations_are_what_each_node_reads_back(tmp_path: Path) -> None:
@@ -116,4 +120,82 @@ def test_an_invalid_coach_or_routine_is_found_before_anything_starts(tmp_path: P
 ])
 def test_bad_session_options_name_the_option(options: dict, match: str) -> None:
     with pytest.raises(ConfigError, match=match):
+        SessionConfig.from_mapping(options, "command line")
+
+
+def test_the_streamers_play_on_the_session_clock_without_sound_card_or_screen(tmp_path: Path) -> None:
+    p, _ = plan(tmp_path)
+    audio, video = p.node(AUDIO), p.node(VIDEO)
+    assert (audio.script, video.script) == ("audio_streamer", "video_streamer")
+    assert audio.config.sink == "null" and video.config.display == "offscreen"
+    assert video.config.preview_rate > 0
+    assert "use_sim_time:=true" in audio.extra and "use_sim_time:=true" in video.extra
+    assert p.node("mock_qt_robot").config.mirror_media is False  # the streamers' status says what played
+    # The session starts only once the streamers (and the participant) listen: no request is lost.
+    assert {(topics.AUDIO_REQUEST, AUDIO), (topics.VIDEO_REQUEST, VIDEO),
+            (topics.AUDIO_STATUS, PARTICIPANT)} <= set(p.listeners)
+    p, _ = plan(tmp_path, audio_sink="device")
+    assert p.node(AUDIO).config.sink == "device"
+    with pytest.raises(ConfigError, match="audio_sink"):
+        plan(tmp_path, audio_sink="speaker")
+
+
+def test_the_packaged_coach_asks_for_the_streamers_built_in_sources(tmp_path: Path) -> None:
+    coach = coach_config(SessionConfig())
+    music = [coach.audio_path.format(coach.audio_exercise_base.format(s)) for s in coach.audio_suffix]
+    assert music == ["beat:110", "beat:115", "beat:120", "beat:125", "beat:130", "beat:135"]
+    assert coach.audio_path.format(coach.audio_relaxing) == "relaxing"
+    assert coach.video_path.format("marching") == "marching"
+    # The thesis's one file per tempo still validates (through the session, as a lab would give it).
+    conf = tmp_path / "coach.yaml"
+    conf.write_text('audio_path: "./audio/{}.wav"\nvideo_path: "./video/{}.mp4"\n'
+                    'audio_exercise_base: "exercise_{}"\n')
+    files = coach_config(SessionConfig(conf=str(conf)))
+    assert files.audio_path.format(files.audio_exercise_base.format("125")) == "./audio/exercise_125.wav"
+    plan(tmp_path, conf=str(conf))  # every node, the coach with its routine, validated
+
+
+def test_a_polar_strap_replaces_the_simulated_participant(tmp_path: Path) -> None:
+    p, _ = plan(tmp_path, source="polar:a1b2c3d4")
+    names = [n.name for n in p.nodes]
+    assert PARTICIPANT not in names and POLAR_STREAMER in names
+    strap = p.node(POLAR_STREAMER)
+    assert strap.script == "polar_streamer" and strap.config.device == "A1B2C3D4" and not strap.config.replay
+    assert strap.config.streams == ["ecg", "hr", "rr"] and strap.extra == ()  # on wall time: LSL clock stamps
+    assert p.device_id == "A1B2C3D4"
+    assert p.node(HR_RECEIVER).config.input == "lsl:PolarH10/A1B2C3D4/HR"
+    assert p.node(ECG_RECEIVER).config.input == "lsl:PolarH10/A1B2C3D4/ECG"
+    assert all(node != PARTICIPANT for _topic, node in p.listeners)
+    assert SessionConfig(source="polar:A1B2C3D4").speed == 1.0  # real time unless told otherwise
+    p, _ = plan(tmp_path, source="polar:A1B2C3D4", no_ecg=True)
+    assert p.node(POLAR_STREAMER).config.streams == ["hr", "rr"]
+
+
+def test_a_replayed_capture_stands_in_for_the_strap(tmp_path: Path) -> None:
+    capture = Path(__file__).resolve().parents[1] / "data" / "polar" / "synthetic_h10.jsonl"
+    p, _ = plan(tmp_path, source=f"polar-replay:{capture}")
+    strap = p.node(POLAR_STREAMER)
+    assert strap.config.replay == str(capture) and strap.config.device == ""
+    assert p.device_id == "0A1B2C3D"  # from the capture's header: Polar H10 0A1B2C3D
+    assert p.node(HR_RECEIVER).config.input == "lsl:PolarH10/0A1B2C3D/HR"
+    headless = tmp_path / "no_id.jsonl"
+    headless.write_text('{"format": "hri_physio.polar.capture", "version": 1, "device": {"name": "Strap"}}\n'
+                        '{"t": 1.0, "op": "notify", "char": "hr", "hex": "1048db03c503"}\n')
+    with pytest.raises(ConfigError, match="names no Polar device id"):
+        plan(tmp_path, source=f"polar-replay:{headless}")
+    (tmp_path / "broken.jsonl").write_text("not json\n")
+    with pytest.raises(ConfigError, match=r"source polar-replay: .*not JSON"):
+        plan(tmp_path, source=f"polar-replay:{tmp_path / 'broken.jsonl'}")
+
+
+@pytest.mark.parametrize("options,message", [
+    ({"source": "polar:A1B2C3D4", "speed": 30}, "speed must be 1"),
+    ({"source": "polar:"}, "8-hex-digit id"),
+    ({"source": "polar:not-an-id"}, "8-hex-digit id"),
+    ({"source": "polar-replay:/nonexistent.jsonl"}, "does not exist"),
+    ({"source": "lsl:x"}, "source must be simulated"),
+    ({"source": "polar:A1B2C3D4", "device_id": "SIM1"}, "device_id"),
+])
+def test_bad_sources_are_one_clear_error(options: dict, message: str) -> None:
+    with pytest.raises(ConfigError, match=message):
         SessionConfig.from_mapping(options, "command line")

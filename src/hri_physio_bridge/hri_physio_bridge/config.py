@@ -20,7 +20,7 @@ import types
 import typing
 from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any, ClassVar, Literal, Self, get_args, get_origin
+from typing import Any, ClassVar, Literal, NoReturn, Self, get_args, get_origin
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
@@ -253,6 +253,13 @@ def _first_error(exc: ValidationError) -> str:
 
 # ----------------------------------------------------------------------------------------------
 # Command line
+class OneLineErrorParser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line (``<prog>: error: ...``, status 2), no usage dump."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
 _METAVAR = {"bool": "BOOL", "int": "INT", "float": "NUM", "str": "TEXT", "list": "A,B,..."}
 
 

@@ -20,7 +20,14 @@ from pathlib import Path
 import numpy as np
 from pydantic import model_validator
 
-from hri_physio_bridge.config import ConfigError, NodeConfig, add_config_arguments, given_options, option
+from hri_physio_bridge.config import (
+    ConfigError,
+    NodeConfig,
+    OneLineErrorParser,
+    add_config_arguments,
+    given_options,
+    option,
+)
 from hri_physio_bridge.launcher import ManagedProcess, ProcessGroup
 from hri_physio_bridge.ros_tools import BackgroundNode
 from hri_physio_bridge.simulator import SimulatorConfig
@@ -92,7 +99,7 @@ class TopicWatcher(BackgroundNode):
 
 
 def parse_options(prog: str, argv: list[str] | None) -> DemoConfig:
-    parser = argparse.ArgumentParser(
+    parser = OneLineErrorParser(
         prog=prog, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_config_arguments(parser, DemoConfig)
     args = parser.parse_args(argv)

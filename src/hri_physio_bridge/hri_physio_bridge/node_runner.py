@@ -23,7 +23,7 @@ import sys
 import threading
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, NoReturn, TypeVar
+from typing import Any, TypeVar
 
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
@@ -31,7 +31,14 @@ from rclpy.exceptions import NameValidationException, ParameterException
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-from hri_physio_bridge.config import ConfigError, NodeConfig, add_config_arguments, given_options, load_yaml
+from hri_physio_bridge.config import (
+    ConfigError,
+    NodeConfig,
+    OneLineErrorParser,
+    add_config_arguments,
+    given_options,
+    load_yaml,
+)
 from hri_physio_bridge.ros_tools import ExecutorThread
 from hri_physio_bridge.stop_signals import install_stop_handlers
 
@@ -162,13 +169,6 @@ def logic_logger(name: str, ros_logger: Any) -> logging.Logger:
 
 # ----------------------------------------------------------------------------------------------
 # Command line
-class OneLineErrorParser(argparse.ArgumentParser):
-    """An argument parser whose errors are one line (``<prog>: error: ...``, status 2), no usage dump."""
-
-    def error(self, message: str) -> NoReturn:
-        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
-
-
 def build_parser(prog: str, config_cls: type[NodeConfig], description: str | None = None,
                  epilog: str | None = None, extra_arguments: Callable[[argparse.ArgumentParser], None]
                  | None = None, default_conf: Path | None = None) -> argparse.ArgumentParser:

@@ -75,11 +75,14 @@ class CoachConfig(NodeConfig):
                                      min_length=1)
     speed_idx: int = option(1, "ladder step at the start", ge=0)
     # --- media and gestures --------------------------------------------------------------------
-    audio_path: str = option("./audio/{}.wav", "audio file of a name ('{}' = the name)")
-    video_path: str = option("./video/{}.mp4", "video file of a name ('{}' = the name)")
+    audio_path: str = option("{}", "audio request of a name ('{}' = the name; the default passes "
+                             "the audio streamer's built-in sources, e.g. './audio/{}.wav' for files)")
+    video_path: str = option("{}", "video request of a name ('{}' = the name; the default passes "
+                             "the video streamer's built-in screens, e.g. './video/{}.mp4' for files)")
     audio_default: str = option("default", "seed key, loaded but not used by the coach yet")
     audio_relaxing: str = option("relaxing", "audio of the calibration and the end")
-    audio_exercise_base: str = option("exercise_{}", "exercise music name ('{}' = the ladder's suffix)")
+    audio_exercise_base: str = option("beat:{}", "exercise music name ('{}' = the ladder's suffix; "
+                                      "beat:<bpm> is the audio streamer's built-in beat)")
     video_default: str = option("splash", "the splash screen video")
     video_relaxing: str = option("relaxing", "video of the calibration")
     video_time: float = option(30.0, "reference video shown before the splash screen", unit="s", gt=0)

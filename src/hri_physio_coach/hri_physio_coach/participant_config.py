@@ -57,6 +57,9 @@ class ParticipantNodeConfig(NodeConfig):
     command_topic: str = option(topics.QT_COMMANDS, "robot command lines the participant follows",
                                 min_length=1)
     state_topic: str = option(topics.PARTICIPANT_STATE, "the model's true state (JSON, 1 Hz)", min_length=1)
+    audio_status_topic: str = option(topics.AUDIO_STATUS, "the audio streamer's status (JSON): the tempo "
+                                     "it reports as playing is the one the participant follows (without "
+                                     "it, the tempo named in 'set audio' commands)", min_length=1)
 
     @model_validator(mode="after")
     def _model_checks(self) -> ParticipantNodeConfig:

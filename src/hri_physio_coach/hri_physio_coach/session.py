@@ -8,6 +8,8 @@ Starts, as separate processes (the console scripts a lab would run):
 * ``neurokit_processor`` - ECG -> HR/HRV features (``/physio/polar_h10/ecg/...``);
 * ``qt_physio_coach`` - the exercise coach, adapting on the strap's HR (or the processor's);
 * ``qt_controller`` + ``mock_qt_robot`` - the robot side;
+* ``audio_streamer`` + ``video_streamer`` - the music (null sink unless ``--audio-sink device``) and
+  the reference videos (offscreen), on the session's clock, their status and preview in the bag;
 * ``physio_recorder`` - every topic into a rosbag2 (MCAP) directory.
 
 Every node's configuration is checked before anything starts. The session gets a folder of its
@@ -19,6 +21,9 @@ times faster than real time. It waits until the robot side is up and heart rate 
 coach's input, sends ``start`` to the coach, shows one live progress display (plain lines when
 the output is not a terminal; every node line with ``--verbose``), and when the coach ends the
 session stops every process cleanly (the recorder last), prints a summary and the folder.
+
+``--source polar:<device id>`` puts a real Polar H10 in the simulated participant's place
+(``polar_streamer``; real time only), ``--source polar-replay:<capture>`` a capture of one.
 """
 
 from __future__ import annotations
@@ -64,9 +69,6 @@ from hri_physio_coach.session_isolation import (
 from hri_physio_coach.session_options import PROG, SessionConfig
 from hri_physio_coach.session_plan import (
     COACH,
-    CONTROLLER,
-    MOCK,
-    PARTICIPANT,
     SessionPlan,
     coach_config,
     plan_session,
@@ -85,7 +87,8 @@ CLOCK_DEPTH = 1000
 class ClockAndWatcher(BackgroundNode):
     """Publishes /clock and watches the session's topics, on its own executor thread."""
 
-    def __init__(self, view: SessionView, hr_topic: str, receivers: list[str]) -> None:
+    def __init__(self, view: SessionView, hr_topic: str, receivers: list[str],
+                 listeners: tuple[tuple[str, str], ...]) -> None:
         from rosgraph_msgs.msg import Clock
         from std_msgs.msg import Float64MultiArray, String
 
@@ -95,6 +98,7 @@ class ClockAndWatcher(BackgroundNode):
         super().__init__("session_launcher")
         self._string_cls = String
         self.view = view
+        self.listeners = listeners
         self.lock = threading.Lock()
         # Deep: at high --speed hundreds of clock messages a second must reach the recorder too.
         self.clock_pub = self.node.create_publisher(Clock, "/clock", CLOCK_DEPTH)
@@ -161,11 +165,10 @@ class ClockAndWatcher(BackgroundNode):
         return {info.node_name for info in self.node.get_subscriptions_info_by_topic(topic)}
 
     def robot_side_ready(self) -> bool:
-        """The controller and the participant hear the robot commands, the coach its control topic,
-        the mock robot the controller's speech."""
-        return ({CONTROLLER, PARTICIPANT} <= self.subscriber_nodes(topics.QT_COMMANDS)
-                and COACH in self.subscriber_nodes(topics.COACH_CONTROL)
-                and MOCK in self.subscriber_nodes(topics.QT_SPEECH_SAY))
+        """Every node listens where the plan says: the controller (and a simulated participant) to the
+        robot commands, the coach to its control topic, the mock robot to the speech, the streamers to
+        their requests (a request published before its subscriber exists would be lost)."""
+        return all(node in self.subscriber_nodes(topic) for topic, node in self.listeners)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -254,7 +257,7 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
                 view: SessionView, group: ProcessGroup, stop: threading.Event, out: Outcome) -> SimClock:
     """Start the nodes, wait for them, run the routine to its end (or a stop); returns the sim clock."""
     receivers = [n.name for n in plan.nodes if n.script == "physio_receiver"]
-    watcher = ClockAndWatcher(view, plan.hr_topic, receivers)
+    watcher = ClockAndWatcher(view, plan.hr_topic, receivers, plan.listeners)
     # The clock runs at --speed from the beginning: before 'start' the participant sits and the
     # processor fills its first window (60 s of ECG) without keeping the launcher waiting.
     clock = SimClock(start=float(int(time.time())), speed=options.speed)
@@ -424,8 +427,11 @@ def _run(options: SessionConfig, plan: SessionPlan, folder: SessionFolder, claim
     console = make_console(options, f"HRI Physio session {plan.coach.participant}")
     view = SessionView(warn=console.say)
     group = ProcessGroup(on_line=console.node_line)
-    console.say(f"HRI Physio session {plan.coach.participant}: simulated participant (age {options.age:g}) "
-                f"-> LSL -> ROS 2 -> coach ({plan.coach.policy}) -> mock QT robot, "
+    who = (f"Polar H10 {plan.device_id}" + (" (replayed capture)" if options.polar_replay else "")
+           if options.polar else f"simulated participant (age {options.age:g})")
+    console.say(f"HRI Physio session {plan.coach.participant}: {who} "
+                f"-> LSL -> ROS 2 -> coach ({plan.coach.policy}) -> mock QT robot, audio and video "
+                f"streamers, "
                 f"at {options.speed:g}x real time")
     domain = (f"ROS domain {claim.domain} (export ROS_DOMAIN_ID={claim.domain} to watch it)" if claim.chosen
               else f"ROS domain {claim.domain} (ROS_DOMAIN_ID)")

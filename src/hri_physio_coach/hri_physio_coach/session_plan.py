@@ -6,6 +6,12 @@ node's own). Each configuration is written to the session folder (``configs/<nod
 given to the node with ``--conf``: what is kept is what ran. Anything invalid - an option, the
 coach's YAML, the routine, a routine that does not fit the coach - raises
 :class:`~hri_physio_bridge.config.ConfigError` before a process is started or a bag created.
+
+Media: ``audio_streamer`` (null sink unless ``--audio-sink`` says otherwise) and ``video_streamer``
+(offscreen) play what the coach asks for, on the session's clock; so the mock robot no longer
+mirrors media requests as its own events (``mirror_media: false``): the streamers' status topics
+say what played. Heart rate comes from the simulated participant, or with ``--source polar:<id>``
+from ``polar_streamer`` and a real Polar H10 (``polar-replay:<capture>`` replays a capture).
 """
 
 from __future__ import annotations
@@ -15,9 +21,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from audio_video_streamers.audio.config import AudioStreamerConfig
+from audio_video_streamers.video.config import VideoStreamerConfig
 from hri_physio_bridge import topics
 from hri_physio_bridge.bag.options import RecorderConfig
 from hri_physio_bridge.config import ConfigError, NodeConfig
+from hri_physio_bridge.polar.capture import CaptureError, read_capture
+from hri_physio_bridge.polar.config import PolarConfig
+from hri_physio_bridge.polar.devices import device_id_of
 from hri_physio_bridge.receiver import ReceiverConfig
 from hri_physio_coach.coach import CoachError, ExerciseCoach
 from hri_physio_coach.config import COACH_NODE, CoachNodeConfig
@@ -39,6 +50,9 @@ SIM_TIME = ("-p", "use_sim_time:=true")
 RECORDER, MOCK, CONTROLLER = "physio_recorder", "mock_qt_robot", "qt_controller"
 HR_RECEIVER, ECG_RECEIVER, PROCESSOR = "hr_receiver", "ecg_receiver", "neurokit_processor"
 PARTICIPANT, COACH = PARTICIPANT_NODE, COACH_NODE
+AUDIO, VIDEO, POLAR_STREAMER = "audio_streamer", "video_streamer", "polar_streamer"
+#: Frames the audio streamer renders at once on the null sink: at 30x sim time, ~320 blocks per wall second.
+NULL_SINK_BLOCK = 4096
 
 
 @dataclass(frozen=True)
@@ -64,6 +78,8 @@ class SessionPlan:
     routine_duration: float  # session seconds from start to the routine's end
     device_id: str
     nodes: tuple[NodeLaunch, ...]
+    #: (topic, node) pairs: the session starts once each node subscribes to its topic (no request lost).
+    listeners: tuple[tuple[str, str], ...] = ()
 
     @property
     def hr_topic(self) -> str:
@@ -109,11 +125,69 @@ def _validated(cls: type[NodeConfig], name: str, values: Mapping[str, Any]) -> A
     return cls.from_mapping(values, name)
 
 
+def replay_device_id(capture_file: str) -> str:
+    """The strap's id in a capture's header (the advertised name, e.g. 'Polar H10 0A1B2C3D')."""
+    try:
+        header = read_capture(capture_file).header
+    except CaptureError as exc:
+        raise ConfigError(f"source polar-replay: {exc}") from None
+    name = (header.get("device") or {}).get("name") if isinstance(header.get("device"), dict) else None
+    device = device_id_of(name)
+    if device is None:
+        raise ConfigError(f"source polar-replay: {capture_file} names no Polar device id in its header "
+                          f"(device name {name!r})")
+    return device
+
+
+def strap_device_id(options: SessionConfig, simulated_id: str) -> str:
+    """The device id in the LSL names the receivers resolve: the strap's, or the simulated one."""
+    if options.polar_device:
+        return options.polar_device.upper()
+    if options.polar_replay:
+        return replay_device_id(options.polar_replay)
+    return simulated_id
+
+
+def media_nodes(options: SessionConfig) -> list[NodeLaunch]:
+    """The audio and video streamers, on the session's clock, never touching a screen."""
+    audio: dict[str, Any] = {"sink": options.audio_sink}
+    if options.audio_sink == "null":
+        audio["block"] = NULL_SINK_BLOCK
+    return [
+        NodeLaunch(AUDIO, "audio_streamer", AUDIO, _validated(AudioStreamerConfig, AUDIO, audio),
+                   ("--ros-args", *SIM_TIME)),
+        NodeLaunch(VIDEO, "video_streamer", VIDEO, _validated(VideoStreamerConfig, VIDEO, {
+            "display": "offscreen"}), ("--ros-args", *SIM_TIME)),
+    ]
+
+
+def heart_rate_node(options: SessionConfig, device_id: str) -> NodeLaunch:
+    """Who wears the strap: the simulated participant, or polar_streamer with a real (or replayed) one."""
+    if not options.polar:
+        return NodeLaunch(PARTICIPANT, "simulated_participant", PARTICIPANT,
+                          _validated(ParticipantNodeConfig, PARTICIPANT, {
+                              "age": options.age, "seed": options.participant_seed, "device_id": device_id,
+                              "update_period": CLOCK_STEP}), ("--ros-args", *SIM_TIME))
+    streams = ["hr", "rr"] if options.no_ecg else ["ecg", "hr", "rr"]  # rr: on LSL for the lab's own tools
+    values: dict[str, Any] = {"streams": streams}
+    if options.polar_replay:
+        values["replay"] = str(Path(options.polar_replay).resolve())
+    else:
+        values["device"] = device_id
+    # On wall time: the strap's samples are stamped on the LSL clock, not on the session's /clock.
+    return NodeLaunch(POLAR_STREAMER, "polar_streamer", POLAR_STREAMER,
+                      _validated(PolarConfig, POLAR_STREAMER, values))
+
+
 def plan_session(options: SessionConfig, folder: SessionFolder, device_id: str,
                  coach: CoachNodeConfig | None = None) -> SessionPlan:
-    """Every node's configuration for this session, in start order (raises ConfigError)."""
+    """Every node's configuration for this session, in start order (raises ConfigError).
+
+    ``device_id`` is the simulated strap's; with a Polar source the strap's own id is used.
+    """
     coach = coach if coach is not None else coach_config(options)
     duration = check_coach(coach)
+    device_id = strap_device_id(options, device_id)
     record = not options.no_record
     nodes: list[NodeLaunch] = []
     if record:
@@ -121,13 +195,11 @@ def plan_session(options: SessionConfig, folder: SessionFolder, device_id: str,
             "output": str(folder.bag), "session_id": coach.participant,
             "discovery_period": 0.2, "status_period": 10.0})))
     nodes.append(NodeLaunch(MOCK, "mock_qt_robot", MOCK, _validated(MockQtRobotConfig, MOCK, {
-        "joint_state_rate": round(1 / CLOCK_STEP, 3)}), ("--ros-args", *SIM_TIME)))
+        "joint_state_rate": round(1 / CLOCK_STEP, 3), "mirror_media": False}), ("--ros-args", *SIM_TIME)))
     nodes.append(NodeLaunch(CONTROLLER, "qt_controller", CONTROLLER,
                             _validated(QtControllerConfig, CONTROLLER, {}), ("--ros-args", *SIM_TIME)))
-    nodes.append(NodeLaunch(PARTICIPANT, "simulated_participant", PARTICIPANT,
-                            _validated(ParticipantNodeConfig, PARTICIPANT, {
-                                "age": options.age, "seed": options.participant_seed, "device_id": device_id,
-                                "update_period": CLOCK_STEP}), ("--ros-args", *SIM_TIME)))
+    nodes.extend(media_nodes(options))
+    nodes.append(heart_rate_node(options, device_id))
     # Each receiver holds its input until all of its listeners are there, so the bag and the
     # coach (or processor) get every sample from the first: HR goes to the launcher's watcher,
     # the recorder and (strap source) the coach; ECG to the processor and the recorder.
@@ -149,4 +221,8 @@ def plan_session(options: SessionConfig, folder: SessionFolder, device_id: str,
         processor = _validated(ProcessorConfig, PROCESSOR, {"input": f"ros:{topics.POLAR_H10_ECG}"})
         nodes.append(NodeLaunch(PROCESSOR, "neurokit_processor", PROCESSOR, processor))
     nodes.append(NodeLaunch(COACH, "qt_physio_coach", COACH, coach, ("--ros-args", *SIM_TIME)))
-    return SessionPlan(coach, duration, device_id, tuple(nodes))
+    listeners = [(topics.QT_COMMANDS, CONTROLLER), (topics.COACH_CONTROL, COACH),
+                 (topics.QT_SPEECH_SAY, MOCK), (topics.AUDIO_REQUEST, AUDIO), (topics.VIDEO_REQUEST, VIDEO)]
+    if not options.polar:
+        listeners += [(topics.QT_COMMANDS, PARTICIPANT), (topics.AUDIO_STATUS, PARTICIPANT)]
+    return SessionPlan(coach, duration, device_id, tuple(nodes), tuple(listeners))

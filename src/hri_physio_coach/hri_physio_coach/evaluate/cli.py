@@ -20,7 +20,13 @@ import argparse
 import shlex
 import sys
 
-from hri_physio_bridge.config import ConfigError, add_config_arguments, given_options, load_yaml
+from hri_physio_bridge.config import (
+    ConfigError,
+    OneLineErrorParser,
+    add_config_arguments,
+    given_options,
+    load_yaml,
+)
 from hri_physio_coach.evaluate.cohort import PopulationError
 from hri_physio_coach.evaluate.config import EvaluateConfig
 from hri_physio_coach.evaluate.evaluation import (
@@ -35,7 +41,7 @@ PROG = "hri_physio_evaluate"
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog=PROG, description=__doc__,
+    parser = OneLineErrorParser(prog=PROG, description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--conf", help="YAML file with any of the options below (flags win)")
     add_config_arguments(parser, EvaluateConfig)

@@ -1,6 +1,8 @@
 """simulated_participant: a person on the exercise step, wearing a (simulated) Polar H10.
 
-Listens to the robot commands on /QtController/input (gesture, gesture speed, music tempo),
+Listens to the robot commands on /QtController/input (gesture, gesture speed) and to the music
+the audio streamer reports as playing on /audio_streamer/status (its tempo: what the person hears;
+until a status arrives, e.g. with no streamer running, the tempo named in ``set audio``),
 runs the heart-rate model of PARTICIPANT_MODEL.md on ROS time (so it follows /clock under
 use_sim_time), and streams what a Polar H10 would: ECG (130 Hz), HR (1 Hz) and RR intervals
 on LSL, named ``[<name_prefix>/]PolarH10/<device_id>/<ECG|HR|RR>``. Its true model state goes
@@ -63,6 +65,8 @@ class SimulatedParticipantNode(ManagedNode):
             raise
         self.state_pub = self.create_publisher(String, cfg.state_topic, event_qos(100))
         self.create_subscription(String, cfg.command_topic, self._on_command, command_qos())
+        self.create_subscription(String, cfg.audio_status_topic, self._on_audio_status, event_qos())
+        self._said_tempo_from_commands = False
         self.create_timer(cfg.update_period, self._tick)
         self._last_state = 0.0
         p = self.params
@@ -86,10 +90,36 @@ class SimulatedParticipantNode(ManagedNode):
         return self.sim
 
     def _on_command(self, msg: String) -> None:
-        if self.observer.observe(msg.data):
-            if self.sim is not None:
-                self.sim.set_activity(self.observer.activity)
-            self.get_logger().info(f"now doing {self.observer.activity}")
+        with self._lock:
+            changed = self.observer.observe(msg.data)
+            if (not self.observer.hears_streamer and not self._said_tempo_from_commands
+                    and msg.data.startswith("set audio")):
+                self._said_tempo_from_commands = True
+                self.get_logger().info(f"no audio streamer status on {self.config.audio_status_topic} yet: "
+                                       "the music tempo follows the 'set audio' commands")
+            if changed:
+                self._apply_activity()
+
+    def _on_audio_status(self, msg: String) -> None:
+        try:
+            status = json.loads(msg.data)
+        except ValueError:
+            return  # not a status this node can read; the recorder keeps it as it is
+        if not isinstance(status, dict):
+            return
+        with self._lock:
+            first = not self.observer.hears_streamer
+            changed = self.observer.observe_audio_status(status)
+            if first:
+                self.get_logger().info(f"the music tempo follows what {self.config.audio_status_topic} "
+                                       "reports as playing")
+            if changed:
+                self._apply_activity()
+
+    def _apply_activity(self) -> None:
+        if self.sim is not None:
+            self.sim.set_activity(self.observer.activity)
+        self.get_logger().info(f"now doing {self.observer.activity}")
 
     def _push(self, kind: str, t: np.ndarray, values: np.ndarray) -> None:
         if len(t):

@@ -1,22 +1,50 @@
 """What the simulated participant takes from the robot: the gesture to imitate, its speed,
-and the music tempo (the coach plays one audio file per tempo, named with its BPM).
+and the music tempo.
+
+The tempo is what the person hears: the one the audio streamer reports as playing on its status
+(``tempo``, or for a file played as it is the tempo its name carries). Before any status has
+been heard (no streamer running, e.g. a participant started alone) the tempo comes from the
+``set audio`` commands, as the coach names one audio file per tempo.
 """
 
 from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
 
 from hri_physio_coach.media_names import tempo_from_name as tempo_from_audio
 from hri_physio_coach.participant.physiology import MARCHING, SEATED, STEPPING, Activity
 from qt_controller.commands import ParseError, SetAudio, SetGesture, parse_command
 
 KNOWN_ACTIVITIES = MARCHING | STEPPING | SEATED
+#: Audio streamer states in which the status describes something the person hears.
+AUDIBLE_STATES = frozenset({"playing", "fading", "error"})
+
+
+def heard_tempo(status: Mapping[str, Any]) -> float | None:
+    """The tempo (BPM) an audio streamer status says is playing, or None (silence, no tempo known).
+
+    ``tempo`` when the streamer knows it (beats, stretched tracks); for a plain file, the tempo
+    in its name (``exercise_125.wav``); nothing for ``relaxing`` or a name without a tempo.
+    An ``error`` status still describes what plays (the failed request changed nothing).
+    """
+    if status.get("state") not in AUDIBLE_STATES:
+        return None
+    tempo = status.get("tempo")
+    if isinstance(tempo, int | float) and not isinstance(tempo, bool) and tempo > 0:
+        return float(tempo)
+    source = status.get("source")
+    return tempo_from_audio(source) if isinstance(source, str) and source else None
 
 
 class RobotObserver:
-    """Turns robot command lines into the participant's current :class:`Activity`."""
+    """Turns robot command lines and audio streamer statuses into the participant's :class:`Activity`."""
 
     def __init__(self, activity: Activity | None = None) -> None:
         self.activity = activity or Activity()
         self.ignored: list[str] = []
+        #: True once an audio streamer status was heard: from then on only statuses set the tempo.
+        self.hears_streamer = False
 
     def observe(self, line: str) -> bool:
         """Update from one command line; True when the activity changed."""
@@ -29,8 +57,21 @@ class RobotObserver:
         if isinstance(command, SetGesture):
             name = command.name if command.name in KNOWN_ACTIVITIES else "rest"
             self.activity = self.activity.with_(name=name, gesture_speed=command.speed)
-        elif isinstance(command, SetAudio):
+        elif isinstance(command, SetAudio) and not self.hears_streamer:
             tempo = tempo_from_audio(command.file)
             if tempo is not None:
                 self.activity = self.activity.with_(tempo_bpm=tempo)
         return self.activity != before
+
+    def observe_audio_status(self, status: Mapping[str, Any]) -> bool:
+        """Update from one ``/audio_streamer/status`` message (decoded JSON); True when the activity changed.
+
+        Without a tempo (silence, a relaxing pad) the cadence keeps the last tempo heard, as it does
+        after a ``set audio`` without one.
+        """
+        self.hears_streamer = True
+        tempo = heard_tempo(status)
+        if tempo is None or tempo == self.activity.tempo_bpm:
+            return False
+        self.activity = self.activity.with_(tempo_bpm=tempo)
+        return True

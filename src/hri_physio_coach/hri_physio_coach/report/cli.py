@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from hri_physio_bridge.config import OneLineErrorParser
 from hri_physio_coach.report.bagdata import ReportError
 from hri_physio_coach.report.build import make_report
 
@@ -13,7 +14,7 @@ PROG = "hri_physio_report"
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = OneLineErrorParser(
         prog=PROG,
         description="Figures (hr_session.png, fuzzy_probability.png, fuzzy_overlay.png, hrv.png), "
         "report.json and a self-contained report.html of one recorded session. Works on a bag whose "
