@@ -77,8 +77,10 @@ def test_coach_can_adapt_on_the_processors_heart_rate(short_session: list[str], 
     assert summary["outcome"] == "finished" and summary["exit_status"] == 0
     starved = counts["gated"].get("too_few_samples", 0)
     assert counts["rule_updates"] >= 5 and starved <= 2, counts
-    # The coach's input is the processor's HR: one value per 5 s window of ECG.
-    assert 270 / 5 - 5 <= counts["hr_samples"] <= 270 / 5 + 2, counts
+    # The coach's input is the processor's HR: one value per 5 s window of ECG. Counted by arrival
+    # between session start and end, so a processor that lags (a loaded machine) may deliver windows
+    # of ECG from before the start inside the session: only the lower bound holds for any load.
+    assert counts["hr_samples"] >= 270 / 5 - 5, counts
     coach = yaml.safe_load((folder / "configs" / "qt_physio_coach.yaml").read_text())["qt_physio_coach"]
     assert coach["ros__parameters"]["hr_topic"] == "/physio/polar_h10/ecg/hr"
 
