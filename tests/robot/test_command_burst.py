@@ -44,7 +44,7 @@ def test_every_line_of_a_10000_line_burst_gets_one_reply_in_order(wall_probe) ->
         publish_all(p, lines)
         wait_until(lambda: len(p.replies) >= before + BURST, 300,
                    lambda: f"{BURST} replies, got {len(p.replies) - before}:\n{ctl.output[-2000:]}")
-        wait_until(lambda: len(burst_volumes(p)) >= BURST // 100, 60, "the mock's volume events")
+        wait_until(lambda: len(burst_volumes(p)) >= BURST // 100, 300, "the mock's volume events")
         assert ctl.proc.poll() is None and mock.proc.poll() is None
         with p.lock:
             replies = p.replies[before:]

@@ -92,7 +92,13 @@ def test_the_bag_holds_the_whole_session_with_no_sample_lost(demo: tuple[Run, Pa
 
     robot = [json.loads(m.data) for m in msgs["/qt_robot/mock/events"]]
     gestures = [e["name"] for e in robot if e.get("event") == "gesture_started"]
-    assert [g for i, g in enumerate(gestures) if i == 0 or g != gestures[i - 1]] == GESTURES
+    performed = [g for i, g in enumerate(gestures) if i == 0 or g != gestures[i - 1]]
+    # The demo's predictive policy may run another of the routine's activities in a slot: the robot
+    # performs exactly the gestures the coach commanded, in order, starting with the thesis's first two.
+    commanded = [e["command"].split()[2] for e in coach
+                 if e["event"] == "command" and e["command"].startswith("set gesture ")]
+    assert performed == [g for i, g in enumerate(commanded) if i == 0 or g != commanded[i - 1]]
+    assert performed[:2] == GESTURES[:2] and set(performed) <= set(GESTURES)
 
     # The participant followed the robot: exercise raised the (true, model) heart rate.
     model = [json.loads(m.data) for m in msgs["/participant/state"]]
