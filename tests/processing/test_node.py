@@ -34,7 +34,7 @@ class Outputs:
     def __init__(self, collector: RosFrameCollector, prefix: str) -> None:
         from std_msgs.msg import String
 
-        from hri_physio_bridge.qos import frame_qos
+        from hri_physio_bridge.qos import event_qos
 
         self.collector = collector
         self.frames = {name: collector.subscribe_frames(f"{prefix}/{name}") for name in OUTPUTS}
@@ -45,7 +45,8 @@ class Outputs:
             with self._lock:
                 self.status.append(json.loads(msg.data))
 
-        collector.node.create_subscription(String, f"{prefix}/status", on_status, frame_qos(100))
+        # As deep as the publisher's: a processor catching up on a backlog publishes windows in bursts.
+        collector.node.create_subscription(String, f"{prefix}/status", on_status, event_qos())
 
     def windows(self) -> list[dict]:
         with self._lock:
@@ -192,6 +193,7 @@ def test_ros_in_ros_out_matches_neurokit_and_timestamps(mitdb, ros_context, coll
         "neurokit_processor:\n  ros__parameters:\n"
         f"    input: ros:{topic}\n    output_prefix: {prefix}\n    window_seconds: 30\n    hop_seconds: 10\n"
         "    sampling_rate: 130\n    wait_for_consumers: 30.0\n"
+        "    hrv_window_seconds: 0.0\n"  # LF, HF, LF/HF per window, as NeuroKit2 on it (long window: below)
     )
     out = Outputs(collector, prefix)
     rng = np.random.default_rng(4)

@@ -94,9 +94,11 @@ def test_simulator_receiver_processor_chain(collector, lsl_name: str) -> None:
         assert w["window"]["t_start"] == clean_t[k * 4 * FS]
         assert w["window"]["t_end"] == clean_t[k * 4 * FS + 8 * FS - 1]
     assert wins[-1]["window"]["final"] and ends[-1] == clean_t[-1]
-    for name in ("hr", "sdnn", "rmssd", "quality", "hf"):
+    for name in ("hr", "sdnn", "rmssd", "quality"):
         stamps = [f.timestamps[0] for f in out.frames[name]]
         assert stamps == ends  # each scalar stamped with the end of the window it describes
+    # HF comes from the long HRV window of beats already published: stamped with that window's end.
+    assert [f.timestamps[0] for f in out.frames["hf"]] == [w["hrv_window"]["t_end"] for w in wins]
     hr = np.array([f.values[0, 0] for f in out.frames["hr"]])
     assert np.all(np.abs(hr - 70) < 5), hr
     assert all(np.isnan(f.values[0, 0]) for f in out.frames["hf"])  # 8 s windows: too short for HF

@@ -42,7 +42,9 @@ def nk_direct_ecg(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict[str, floa
 def test_ecg_features_equal_neurokit_on_each_window(mitdb, window: float, hop: float, seconds: float) -> None:
     n = int(seconds * FS)
     t, x = 1000.0 + mitdb.t[:n], mitdb.x[:n]  # an LSL-like clock offset
-    cfg = ProcessorConfig.from_mapping({"window_seconds": window, "hop_seconds": hop})
+    # hrv_window_seconds 0: LF, HF, LF/HF on each window itself (the long window is tested below)
+    cfg = ProcessorConfig.from_mapping({"window_seconds": window, "hop_seconds": hop,
+                                        "hrv_window_seconds": 0})
     _, out = run_processor(cfg, t, x, random_chunks(n, np.random.default_rng(window), 1, 700))
     wins = statuses(out)
     assert len(wins) >= 2
@@ -119,7 +121,7 @@ def test_ppg_mode_equals_ppg_process() -> None:
     x = nk.ppg_simulate(duration=70, sampling_rate=FS, heart_rate=75, random_state=4)
     t = 50.0 + np.arange(x.shape[0]) / FS
     cfg = ProcessorConfig.from_mapping({"mode": "ppg", "window_seconds": 60, "hop_seconds": 5,
-                                        "input": "ros:/physio/polar_oh1/ppg"})
+                                        "hrv_window_seconds": 0, "input": "ros:/physio/polar_oh1/ppg"})
     _, out = run_processor(cfg, t, x, random_chunks(x.shape[0], np.random.default_rng(0), 1, 300))
     wins = statuses(out)
     assert len(wins) == 3 and all(st["ok"] for st in wins)

@@ -197,3 +197,62 @@ def test_text_input_is_refused_in_one_line(log) -> None:
                                   sleep=clock.sleep)
     assert pipeline.run(stop) == 1
     assert len(rec.at(logging.ERROR)) == 1 and "needs numbers" in rec.at(logging.ERROR)[0]
+
+
+class QueuedInput(FakeLsl):
+    """A ros:-like input whose frames are all queued already (the node was busy), some lost on the way."""
+
+    def __init__(self, clock: FakeClock, frames: list[Frame], lost_at: dict[int, int]) -> None:
+        super().__init__(clock, frames)
+        self.lost_at = lost_at  # frames left in the queue -> lost_messages from then on
+        self.taken = 0
+
+    def backlog(self) -> int:
+        return len(self.frames)
+
+    def receive(self, timeout: float = 0.1) -> Frame | None:
+        self.lost_messages = max([v for k, v in self.lost_at.items() if len(self.frames) <= k], default=0)
+        frame = super().receive(timeout)
+        self.taken += frame is not None
+        return frame
+
+
+def test_a_backlog_is_processed_in_batches_counted_and_reported(log, mitdb) -> None:
+    logger, rec = log
+    stop = threading.Event()
+    clock = FakeClock(stop)
+    out: list[Output] = []
+    frames = ecg_frames(mitdb, 30, chunk=3)  # 1300 frames, all queued at once
+    source = QueuedInput(clock, frames, lost_at={600: 4, 200: 9})
+    pipeline = ProcessingPipeline(config(), source, out.append, logger, clock=clock, sleep=clock.sleep)
+    pushes: list[int] = []
+    push = pipeline.push
+    pipeline.push = lambda frame: (pushes.append(frame.num_samples), push(frame))[1]  # type: ignore[method-assign]
+    assert pipeline.run(stop) == 0
+    assert source.taken == 1300 and sum(pushes) == 30 * FS
+    assert len(pushes) < 1300 / 100  # queued frames joined (up to 256 per step), not one push each
+    status = [o.payload for o in out if isinstance(o, StatusOutput)]
+    windows = [s for s in status if s["event"] == "window"]
+    ends = [100 + k - 1 / FS for k in (10, 15, 20, 25, 30)]
+    assert [w["window"]["t_end"] for w in windows] == pytest.approx(ends)
+    assert all("input" in w and w["input"]["backlog"] >= 0 for w in windows)
+    lost = [s for s in status if s["event"] == "input_lost"]
+    assert lost and lost[0]["dropped_frames"] == 4 and not lost[0]["ok"]  # one event per report period
+    stopped = status[-1]
+    assert stopped["event"] == "stopped" and not stopped["ok"]
+    assert stopped["input"] == {"samples_in": 30 * FS, "backlog": 0, "max_backlog": 1299, "dropped_frames": 9}
+    behind = [m for m in rec.at(logging.WARNING) if "behind" in m]
+    assert len(behind) == 1 and "1299 frame(s) queued" in behind[0]  # rate-limited
+
+
+def test_a_clean_run_ends_with_an_ok_stopped_event(log, mitdb) -> None:
+    logger, _ = log
+    stop = threading.Event()
+    clock = FakeClock(stop)
+    out: list[Output] = []
+    pipeline = ProcessingPipeline(config(), FakeLsl(clock, ecg_frames(mitdb, 12)), out.append, logger,
+                                  clock=clock, sleep=clock.sleep)
+    assert pipeline.run(stop) == 0
+    stopped = out[-1].payload
+    assert stopped["event"] == "stopped" and stopped["ok"] and stopped["t"] == pytest.approx(112 - 1 / FS)
+    assert stopped["input"]["samples_in"] == 12 * FS and stopped["input"]["dropped_frames"] == 0

@@ -44,6 +44,13 @@ class ProcessorConfig(NodeConfig):
     channel: int = option(0, "which input channel to process (0-based)", ge=0)
     window_seconds: float = option(60.0, "signal per processed window", unit="s", gt=0)
     hop_seconds: float = option(5.0, "time between window starts (window - hop = overlap)", unit="s", gt=0)
+    hrv_window_seconds: float = option(300.0, "LF, HF and LF/HF from the beats of this much clean signal "
+                                       "before each window's published end (5 min for LF/HF, 2 min LF, "
+                                       "1 min HF; 0 = on each window itself)", unit="s", ge=0)
+    input_depth: int = option(4000, "frames a ros: input subscription holds until the node takes them "
+                              "(keep below Fast DDS's 5000-sample reader limit, else a publisher that "
+                              "outruns the processor is blocked; frames lost are counted and reported)",
+                              unit="frames", ge=1)
     lsl_output: bool = option(False, "also publish every output on LSL")
     lsl_prefix: str = option("", "LSL stream-name prefix ('' = output_prefix)")
     quality_method: Literal["templatematch", "averageQRS", "zhao2018", "none"] = option(
@@ -170,6 +177,7 @@ class ProcessorConfig(NodeConfig):
             saturation_fraction=self.mode_default("saturation_fraction"),
             rate_tolerance=self.rate_tolerance,
             correct_artifacts=self.correct_artifacts,
+            frequency_domain=self.hrv_window_seconds == 0,
         )
 
     def resolved_output_prefix(self) -> str:

@@ -11,6 +11,9 @@ with a reason (``WindowResult.nan_reasons``), never a silent 0. Window-level pro
 
 Window-length rules for frequency-domain HRV follow NeuroKit2's guidance: HF needs at
 least 1 min, LF 2 min and LF/HF 5 min of signal; shorter windows give NaN with the reason.
+With ``frequency_domain`` off, :func:`extract` leaves LF, HF and LF/HF to the caller, which
+computes them with :func:`hrv_frequency_of_beats` on a longer run of beats (the processor's
+``hrv_window_seconds``).
 """
 
 from __future__ import annotations
@@ -41,6 +44,8 @@ SIGNAL_FEATURES: dict[str, tuple[str, ...]] = {
 
 #: Minimum window length (s) for each frequency-domain HRV feature (NeuroKit2's guidance).
 MIN_SECONDS = {"hf": 60.0, "lf": 120.0, "lfhf": 300.0}
+FREQUENCY_SCALARS = ("lf", "hf", "lfhf")
+_NK_FREQUENCY_COLUMNS = {"lf": "HRV_LF", "hf": "HRV_HF", "lfhf": "HRV_LFHF"}
 
 QUALITY_METHODS = ("templatematch", "averageQRS", "zhao2018", "none")
 #: zhao2018 answers with a category; published as a number.
@@ -62,6 +67,7 @@ class FeatureSettings:
     saturation_fraction: float = 0.01
     rate_tolerance: float = 0.05
     correct_artifacts: bool = False
+    frequency_domain: bool = True  # LF, HF, LF/HF on the window itself (off: the caller's long window)
 
     @property
     def nk_rate(self) -> int | float:
@@ -223,18 +229,60 @@ def _heart(clean: np.ndarray, peaks: np.ndarray, quality: Callable[[], float],
     hrv_time = nk.hrv_time(peaks, sampling_rate=fs)
     for key, col in (("sdnn", "HRV_SDNN"), ("rmssd", "HRV_RMSSD"), ("pnn50", "HRV_pNN50")):
         res.scalars[key] = float(hrv_time[col].iloc[0])
-    if duration >= min(MIN_SECONDS.values()):
-        hrv_freq = nk.hrv_frequency(peaks, sampling_rate=fs)
-        for key, col in (("lf", "HRV_LF"), ("hf", "HRV_HF"), ("lfhf", "HRV_LFHF")):
-            res.scalars[key] = float(hrv_freq[col].iloc[0])
-    for key, need in MIN_SECONDS.items():
-        if duration < need:
+    if not cfg.frequency_domain:
+        for key in FREQUENCY_SCALARS:
+            res.nan_reasons[key] = "computed on the long HRV window (hrv_window_seconds), not per window"
+    else:
+        if duration >= min(MIN_SECONDS.values()):
+            hrv_freq = nk.hrv_frequency(peaks, sampling_rate=fs)
+            for key, col in _NK_FREQUENCY_COLUMNS.items():
+                res.scalars[key] = float(hrv_freq[col].iloc[0])
+        res.nan_reasons.update(_too_short(duration, "window"))
+        for key in res.nan_reasons.keys() & set(FREQUENCY_SCALARS):
             res.scalars[key] = math.nan
-            res.nan_reasons[key] = f"window {duration:g} s shorter than the {need:g} s {key.upper()} needs"
     for key, value in res.scalars.items():
         if not math.isfinite(value) and key not in res.nan_reasons:
             res.nan_reasons[key] = "NeuroKit2 returned NaN (too few or too irregular beats)"
     return res
+
+
+def _too_short(seconds: float, what: str) -> dict[str, str]:
+    """NaN reasons for the frequency-domain features that ``seconds`` of beats cannot support."""
+    return {key: f"{what} {seconds:g} s shorter than the {need:g} s {key.upper()} needs"
+            for key, need in MIN_SECONDS.items() if seconds < need}
+
+
+def hrv_frequency_of_beats(beat_times: np.ndarray, seconds: float) -> tuple[dict[str, float], dict[str, str]]:
+    """LF, HF and LF/HF of a run of beats (times in s, no gap between them) spanning ``seconds``.
+
+    The RR series (ms) goes to NeuroKit2's ``hrv_frequency`` as ``{"RRI": ...}``: the same
+    computation as from R-peak indices, but from the beats' source timestamps, so beats found by
+    different windows join into one series. Returns the values and the NaN reasons.
+    """
+    import neurokit2 as nk
+
+    beats = np.asarray(beat_times, dtype=np.float64).reshape(-1)
+    values = dict.fromkeys(FREQUENCY_SCALARS, math.nan)
+    reasons = _too_short(seconds, "clean beat series of")
+    if len(reasons) == len(FREQUENCY_SCALARS):
+        return values, reasons
+    if beats.shape[0] < 3:
+        reason = f"only {beats.shape[0]} beat(s) in the {seconds:g} s HRV window"
+        return values, dict.fromkeys(FREQUENCY_SCALARS, reason)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            freq = nk.hrv_frequency({"RRI": np.diff(beats) * 1000.0})
+    except Exception as exc:  # NeuroKit2 raises many types on degenerate input
+        reason = f"NeuroKit2 failed: {type(exc).__name__}: {exc}"
+        return values, dict.fromkeys(FREQUENCY_SCALARS, reason)
+    for key, col in _NK_FREQUENCY_COLUMNS.items():
+        if key in reasons:
+            continue
+        values[key] = float(freq[col].iloc[0])
+        if not math.isfinite(values[key]):
+            reasons[key] = "NeuroKit2 returned NaN (too few or too irregular beats)"
+    return values, reasons
 
 
 # -- EDA -----------------------------------------------------------------------------

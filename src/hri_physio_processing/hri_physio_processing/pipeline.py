@@ -6,6 +6,13 @@ long. A file input that is not there is an error at once; a stream that may stil
 attempts, an idle backoff between them and a rate-limited "still waiting" line, until it
 appears or the node is stopped. A lost input closes the current segment and is waited for
 the same way.
+
+The input side loses nothing silently: a ros: input's subscription only queues frames (the
+transport's own thread takes them off the middleware at once, into an unbounded queue) and
+this loop processes them. When processing falls behind, the queued frames are counted
+(``input_backlog``, a rate-limited warning); frames the middleware itself lost before they were
+taken are counted too (``dropped_frames``, reported in an ``input_lost`` status event). Both are
+in every window's status under ``input``.
 """
 
 from __future__ import annotations
@@ -17,7 +24,10 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
 from hri_physio_bridge.frames import Frame
+from hri_physio_bridge.rate_limit import RateLimitedLog
 from hri_physio_bridge.streamers.base import (
     OpenCancelled,
     Streamer,
@@ -31,6 +41,13 @@ from hri_physio_processing.processor import NeurokitProcessor, Output, StatusOut
 
 #: Inputs that are there or not (a file): never waited for.
 NOT_WAITED_FOR = frozenset({"csv"})
+#: Queued input frames from which "processing is behind the input" is logged (rate-limited).
+BACKLOG_WARNING_FRAMES = 1000
+#: Seconds between two backlog warnings, and between two ``input_lost`` status events.
+INPUT_REPORT_PERIOD = 10.0
+#: When frames are queued, up to this many are joined into one chunk per step (catches up faster;
+#: the outputs do not depend on the chunking).
+MAX_BATCH_FRAMES = 256
 
 
 class ProcessingPipeline:
@@ -64,6 +81,11 @@ class ProcessingPipeline:
         self._flags: tuple[str, ...] = ()
         self.opener: StreamOpener | None = None
         self.connected = False
+        self.max_backlog = 0  # most input frames ever queued at once
+        self._backlog_log = RateLimitedLog(log.warning, period=INPUT_REPORT_PERIOD, monotonic=clock)
+        self._lost_reported = 0
+        self._lost_reported_at = -math.inf
+        self._last_t = math.nan  # source time of the newest sample taken off the input
 
     @property
     def waits_for_input(self) -> bool:
@@ -85,6 +107,13 @@ class ProcessingPipeline:
                     self.log.info(f"{self.cfg.input} ended")
                     break
             self.publish(self.processor.finish())
+            left = self.source.backlog()
+            if left:
+                self.log.warning(f"stopped with {left} input frame(s) received but not processed")
+            self.publish([StatusOutput({
+                "t": self._last_t if math.isfinite(self._last_t) else None, "event": "stopped",
+                "mode": self.cfg.mode, "ok": not (left or self.source.lost_messages),
+                "input": self.input_state(), "stats": self.processor.stats.as_dict()})])
         except StreamerError as exc:
             self.log.error(str(exc))
             return 1
@@ -135,9 +164,60 @@ class ProcessingPipeline:
             self.source.close()
             return self.open(stop)
         if frame is not None:
+            self._watch_input()
+            frame = self._with_queued(frame)
+            if frame.num_samples:
+                self._last_t = float(frame.timestamps[-1])
             self.push(frame)
             return True
+        self._watch_input()
         return not getattr(self.source, "exhausted", False)
+
+    def _with_queued(self, frame: Frame) -> Frame:
+        """``frame`` joined with the frames already queued behind it (same layout), if any."""
+        frames = [frame]
+        while len(frames) < MAX_BATCH_FRAMES and self.source.backlog() > 0:
+            nxt = self.source.receive(0.0)
+            if nxt is None:
+                break
+            if nxt.channels != frames[0].channels or nxt.values.dtype != frames[0].values.dtype:
+                self.push(self._join(frames))  # in order; a changed layout is push()'s to judge
+                frames = []
+            frames.append(nxt)
+        return self._join(frames)
+
+    @staticmethod
+    def _join(frames: list[Frame]) -> Frame:
+        if len(frames) == 1:
+            return frames[0]
+        return Frame(np.concatenate([f.timestamps for f in frames]),
+                     np.concatenate([f.values for f in frames]), frames[0].channels)
+
+    # -- input health ----------------------------------------------------------------------------
+    def input_state(self) -> dict[str, int]:
+        """Samples processed, frames queued now (and at most), frames the transport lost."""
+        return {"samples_in": self.processor.stats.samples_in, "backlog": self.source.backlog(),
+                "max_backlog": self.max_backlog, "dropped_frames": self.source.lost_messages}
+
+    def _watch_input(self) -> None:
+        backlog = self.source.backlog()
+        self.max_backlog = max(self.max_backlog, backlog)
+        if backlog >= BACKLOG_WARNING_FRAMES:
+            self._backlog_log.report(
+                "backlog", f"processing is behind {self.cfg.input}: {backlog} frame(s) queued, outputs come "
+                "late", "time(s) behind")
+        lost = self.source.lost_messages
+        now = self._clock()
+        if lost > self._lost_reported and now - self._lost_reported_at >= INPUT_REPORT_PERIOD:
+            self.publish([StatusOutput({
+                "t": self._last_t if math.isfinite(self._last_t) else None, "event": "input_lost",
+                "mode": self.cfg.mode, "ok": False, "dropped_frames": lost, "new": lost - self._lost_reported,
+                "backlog": self.source.backlog(),
+                "reason": f"{lost} input frame(s) lost by the middleware before the processor took them "
+                          f"(its queue of input_depth={self.cfg.input_depth} frames was full); the holes "
+                          "show as gaps",
+            })])
+            self._lost_reported, self._lost_reported_at = lost, now
 
     def push(self, frame: Frame) -> None:
         if frame.values.dtype.kind not in "fiu":
@@ -151,6 +231,8 @@ class ProcessingPipeline:
 
     def publish(self, outputs: list[Output]) -> None:
         for out in outputs:
+            if isinstance(out, StatusOutput) and out.payload.get("event") == "window":
+                out.payload["input"] = self.input_state()
             self.emit(out)
             if isinstance(out, StatusOutput):
                 self._log_status(out.payload)
@@ -158,9 +240,11 @@ class ProcessingPipeline:
     # -- logging ---------------------------------------------------------------------------------
     def _log_status(self, status: dict[str, Any]) -> None:
         log = self.log
-        if status.get("event") != "window":
+        if status.get("event") == "discontinuity":
             log.warning(f"input discontinuity: {status['reason']}")
             return
+        if status.get("event") != "window":
+            return  # input_lost: the transport logs its losses itself (rate-limited)
         flags = tuple(f["code"] for f in status["flags"])
         feats = status["features"]
         text = (f"window {status['window']['index']} ending t={status['t']:.3f}: "

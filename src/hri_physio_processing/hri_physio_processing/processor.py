@@ -18,10 +18,18 @@ by less than two guards (down to windows that just meet, hop = window), the clea
 and peaks are taken from a second NeuroKit2 pass over the window plus a lead-in of two guards
 of preceding samples, so the held-back stretch is in the interior of the next window's pass;
 the scalar features are always computed on the window alone.
+
+Frequency-domain HRV (LF, HF, LF/HF) needs 1 to 5 min of beats, longer than the default 60 s
+window. With ``hrv_window_seconds`` > 0 it is computed from the beats already published (each
+beat once, by source time) over the last ``hrv_window_seconds`` of clean signal ending at the
+window's published end, and stamped with that end: no second peak detection. The beat series
+restarts at a gap, a clock jump or a flagged window (no beats are trusted there), so HF appears
+1 min, LF 2 min and LF/HF 5 min after the last restart.
 """
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -31,12 +39,14 @@ import numpy as np
 from hri_physio_bridge.frames import Frame
 from hri_physio_processing.config import ProcessorConfig
 from hri_physio_processing.features import (
+    FREQUENCY_SCALARS,
     PEAKS_FEATURE,
     SCALARS,
     SIGNAL_FEATURES,
     WindowResult,
     detect,
     extract,
+    hrv_frequency_of_beats,
 )
 from hri_physio_processing.windowing import ClockJump, Discarded, Gap, Window, WindowAccumulator
 
@@ -127,6 +137,10 @@ class NeurokitProcessor:
         self._last_event_t: float | None = None
         # The last window of the segment if it kept an unpublished tail (it was not final).
         self._open: _View | None = None
+        # Long-window HRV: published beat times since the clean beat series (re)started.
+        self.hrv_window = float(cfg.hrv_window_seconds) if "lf" in SCALARS[cfg.mode] else 0.0
+        self._beats: list[float] = []
+        self._clean_since: float | None = None
 
     # -- public API ------------------------------------------------------------
     def push(self, frame: Frame) -> list[Output]:
@@ -182,6 +196,7 @@ class NeurokitProcessor:
         self._note(p, t_before, t_after,
                    f"{kind} {t_before:.6f} -> {t_after:.6f} ({t_after - t_before:+.4g} s)")
         self._boundary = self._last_peak = None  # a new segment starts
+        self._restart_beats()
         out.extend(self._maybe_report(t_after))
         return out
 
@@ -240,11 +255,54 @@ class NeurokitProcessor:
         out, peaks, dups = self._publish_region(view, start, end)
         self._open = None if w.final or end == view.t.shape[0] else view
         t_end = w.t_end
+        hrv = self._long_window_hrv(view, start, end, peaks, res) if self.hrv_window > 0 else None
         for name in SCALARS[self.cfg.mode]:
             value = res.scalars[name]
-            out.append(FrameOutput(name, Frame(np.array([t_end]), np.array([[value]]), (name,))))
-        out.append(StatusOutput(self._status(w, res, view, start, end, peaks, dups)))
+            stamp = hrv["t_end"] if hrv is not None and name in FREQUENCY_SCALARS else t_end
+            out.append(FrameOutput(name, Frame(np.array([stamp]), np.array([[value]]), (name,))))
+        status = self._status(w, res, view, start, end, peaks, dups)
+        if hrv is not None:
+            status["hrv_window"] = hrv
+        out.append(StatusOutput(status))
         return out
+
+    # -- long-window frequency-domain HRV ----------------------------------------
+    def _restart_beats(self) -> None:
+        self._beats.clear()
+        self._clean_since = None
+
+    def _long_window_hrv(self, view: _View, start: int, end: int, peaks: np.ndarray,
+                         res: WindowResult) -> dict[str, Any] | None:
+        """Track the published beats; LF, HF, LF/HF of the last ``hrv_window`` s of them into ``res``.
+
+        Returns the long window's extent (None when nothing has been published in this segment).
+        """
+        if end > start:
+            if res.ok:
+                if self._clean_since is None:
+                    self._clean_since = float(view.t[start])
+                self._beats.extend(view.t[peaks].tolist())
+            else:  # a flagged stretch has no trusted beats: the series restarts after it
+                self._restart_beats()
+        if self._boundary is None:
+            return None
+        t_end = self._boundary
+        if self._clean_since is None:
+            return {"t_start": None, "t_end": t_end, "seconds": 0.0, "beats": 0}
+        seconds = min(self.hrv_window, t_end - self._clean_since)
+        t_start = t_end - seconds
+        first = bisect.bisect_left(self._beats, t_start)
+        del self._beats[:first]  # older beats never fall inside a later long window
+        beats = np.asarray(self._beats)
+        if res.ok:
+            values, reasons = hrv_frequency_of_beats(beats, seconds)
+            for key in FREQUENCY_SCALARS:
+                res.scalars[key] = values[key]
+                if key in reasons:
+                    res.nan_reasons[key] = reasons[key]
+                else:
+                    res.nan_reasons.pop(key, None)
+        return {"t_start": t_start, "t_end": t_end, "seconds": seconds, "beats": int(beats.shape[0])}
 
     def _view(self, w: Window, res: WindowResult) -> _View:
         """Signal and peaks to publish from: the window itself, or the window plus its lead-in."""

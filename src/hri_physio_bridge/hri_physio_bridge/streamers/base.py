@@ -121,6 +121,8 @@ class Streamer(abc.ABC):
         self.spec: StreamSpec | None = None
         #: Input messages that arrived but could not be used (malformed, wrong shape); counted, not fatal.
         self.bad_messages = 0
+        #: Input messages the transport says it lost before they reached us (e.g. a full DDS reader queue).
+        self.lost_messages = 0
 
     @property
     def uri(self) -> str:
@@ -153,6 +155,10 @@ class Streamer(abc.ABC):
     @abc.abstractmethod
     def publish(self, frame: Frame) -> None:
         """Send a frame of samples."""
+
+    def backlog(self) -> int:
+        """Input chunks received by the transport but not yet taken with :meth:`receive`."""
+        return 0
 
     #: Whether :meth:`consumer_count` can count listeners (not just tell whether there is one).
     counts_consumers = False

@@ -30,10 +30,10 @@ def _csv(address: str, *, max_chunk: int = 1024, **_: Any) -> Streamer:
     return CsvStreamer(address, max_chunk=max_chunk)
 
 
-def _ros(address: str, *, node: Any = None, **_: Any) -> Streamer:
+def _ros(address: str, *, node: Any = None, depth: int | None = None, **_: Any) -> Streamer:
     from hri_physio_bridge.streamers.ros import RosStreamer
 
-    return RosStreamer(address, node=node)
+    return RosStreamer(address, node=node) if depth is None else RosStreamer(address, node=node, depth=depth)
 
 
 register("lsl", _lsl)
@@ -60,7 +60,7 @@ def split_uri(uri: str) -> tuple[str, str]:
 
 
 def create_streamer(uri: str, **options: Any) -> Streamer:
-    """Build the streamer for ``uri``. Options: ``node`` (for ros:), ``max_chunk``."""
+    """Build the streamer for ``uri``. Options: ``node`` and ``depth`` (for ros:), ``max_chunk``."""
     scheme, address = split_uri(uri)
     return _REGISTRY[scheme](address, **options)
 

@@ -51,6 +51,7 @@ class RosStreamer(Streamer):
         self._sub = None
         self._pub = None
         self._expected: StreamSpec | None = None
+        self._last_seq: dict[bytes, int] = {}  # per publisher: the last sequence number seen
         # Every bad message is counted; at most one line per kind of problem every 5 s is logged.
         self._bad_log = RateLimitedLog(on_bad_message or (lambda text: node.get_logger().error(text)))
 
@@ -74,12 +75,35 @@ class RosStreamer(Streamer):
         self.spec = spec
         return spec
 
+    def _count_skipped(self, info: dict) -> None:
+        """Count messages a publisher sent that never reached us (its sequence numbers skip).
+
+        A full reader queue drops the oldest messages without any middleware event; the
+        publisher's sequence numbers show it. Counted in ``lost_messages`` and logged, rate-limited.
+        """
+        seq = info.get("publication_sequence_number")
+        if not seq:  # None (or 0): this middleware does not number messages
+            return
+        gid = info.get("publisher_gid") or {}
+        key = bytes(gid.get("data", b""))
+        last = self._last_seq.get(key)
+        self._last_seq[key] = seq
+        if last is not None and seq > last + 1:
+            skipped = seq - last - 1
+            self.lost_messages += skipped
+            self._bad_log.report("lost", f"{self.topic}: {skipped} message(s) lost before they were taken "
+                                 f"(input queue of {self.depth} full?)", "message(s) lost", count=skipped)
+
+    def backlog(self) -> int:
+        return self._queue.qsize()
+
     def _reject(self, kind: str, why: str) -> None:
         """Count a message that cannot be used; log it, rate-limited per ``kind`` of problem."""
         self.bad_messages += 1
         self._bad_log.report(kind, f"{self.topic}: message rejected: {why}", "message(s) rejected")
 
-    def _on_frame(self, msg: Float64MultiArray) -> None:
+    def _on_frame(self, msg: Float64MultiArray, info: dict) -> None:
+        self._count_skipped(info)
         try:
             frame = msg_to_frame(msg)
         except FrameFormatError as exc:
@@ -99,7 +123,8 @@ class RosStreamer(Streamer):
             frame = Frame(frame.timestamps, values.astype(self._np_dtype), frame.channels)
         self._queue.put(frame)
 
-    def _on_marker(self, msg: String) -> None:
+    def _on_marker(self, msg: String, info: dict) -> None:
+        self._count_skipped(info)
         try:
             t, data = msg_to_marker(msg)
         except FrameFormatError as exc:

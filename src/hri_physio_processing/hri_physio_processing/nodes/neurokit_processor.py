@@ -55,7 +55,9 @@ class NeurokitProcessorNode(ManagedNode):
         self.outputs: dict[str, list[Streamer]] = {}
         self.status_pub = self.create_publisher(String, f"{self.prefix}/status", event_qos())
         self._open_outputs()
-        source = create_streamer(cfg.input, node=self, max_chunk=max(1, cfg.hop_samples))
+        # A ros: input's callback only queues the frame; the pipeline processes on the main thread.
+        source = create_streamer(cfg.input, node=self, max_chunk=max(1, cfg.hop_samples),
+                                 depth=cfg.input_depth)
         self.pipeline = ProcessingPipeline(cfg, source, self.emit, self.log, consumers=self.consumer_count,
                                            outputs_label=self.prefix)
 
@@ -93,7 +95,8 @@ class NeurokitProcessorNode(ManagedNode):
     def run(self, stop: threading.Event) -> int:
         code = self.pipeline.run(stop)
         if self.pipeline.processor.stats.samples_in:
-            self.get_logger().info(f"done: {json.dumps(self.pipeline.processor.stats.as_dict())}")
+            stats = {**self.pipeline.processor.stats.as_dict(), "input": self.pipeline.input_state()}
+            self.get_logger().info(f"done: {json.dumps(stats)}")
         return code
 
     def close(self) -> None:
