@@ -108,8 +108,8 @@ class ClockAndWatcher(BackgroundNode):
         def on_hr(msg: Float64MultiArray) -> None:
             frame = msg_to_frame(msg)
             with self.lock:
-                for bpm in frame.values[:, -1]:
-                    view.on_hr(float(bpm))
+                for t, bpm in zip(frame.timestamps, frame.values[:, -1], strict=True):
+                    view.on_hr(float(bpm), float(t))
                 if strap:
                     view.strap_samples += frame.num_samples
 

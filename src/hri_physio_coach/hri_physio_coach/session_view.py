@@ -45,7 +45,9 @@ class SessionView:
     state: dict = field(default_factory=dict)
     hr: float = math.nan
     hr_seen: int = 0  # on the coach's HR topic, since launch
-    hr_samples: int = 0  # on the coach's HR topic, between session start and end
+    #: Sample times (sim time) of every HR value on the coach's HR topic. Counted against the session's
+    #: start and end only when asked: under load a value can arrive after the event that bounds it.
+    hr_times: list[float] = field(default_factory=list, repr=False)
     strap_samples: int = 0  # on the strap's HR topic: proves the LSL -> ROS 2 path at start-up
     model_hr: float = math.nan
     zone: tuple[float, float] | None = None
@@ -118,11 +120,19 @@ class SessionView:
                 self.held[str(decision.get("gate") or "unspecified")] += 1
         self.events[kind] += 1
 
-    def on_hr(self, bpm: float) -> None:
+    @property
+    def hr_samples(self) -> int:
+        """HR values on the coach's input whose sample time lies in the session (start <= t < end)."""
+        if self.started_at is None:
+            return 0
+        end = math.inf if self.ended_at is None else self.ended_at
+        return sum(self.started_at <= t < end for t in self.hr_times)
+
+    def on_hr(self, bpm: float, t: float) -> None:
+        """One HR value with its sample time (sim time)."""
         self.hr = bpm
         self.hr_seen += 1
-        if self.started_at is not None and self.ended_at is None:
-            self.hr_samples += 1
+        self.hr_times.append(t)
         if self.zone is not None and self.state.get("phase_kind") in EXERCISE_PHASES:
             self.exercise_hr += 1
             self.exercise_in_zone += int(self.zone[0] <= bpm <= self.zone[1])
