@@ -236,7 +236,7 @@ def test_ctrl_c_while_waiting_exits_at_once(lsl_name: str, waiting_for: str) -> 
     if waiting_for == "input":
         outlet = None
         args = ["--input", f"lsl:{lsl_name}-never", "--resolve-timeout", "30"]
-        waiting, stopped = "waiting up to 30 s for it to appear", "stopped before the input"
+        waiting, stopped = "waiting up to 30 s for it", "stopped before the input"
     else:
         outlet = counter_outlet(lsl_name, channels=1)
         args = ["--input", f"lsl:{lsl_name}", "--wait-for-consumers", "30"]

@@ -222,7 +222,9 @@ class PhysioReceiver:
         Raises OpenCancelled when :meth:`request_stop` comes while waiting for the input.
         """
         cfg = self.config
-        self.log.info(f"opening {self.source.uri} (waiting up to {cfg.resolve_timeout:g} s for it to appear)")
+        # A file is there or not (never waited for); a stream may still appear.
+        waits = "" if self.source.scheme == "csv" else f" (waiting up to {cfg.resolve_timeout:g} s for it)"
+        self.log.info(f"opening {self.source.uri}{waits}")
         spec = self.source.open_input(cfg.expected_spec(), timeout=cfg.resolve_timeout, stop=self._stop)
         try:
             self._check_declared(spec)

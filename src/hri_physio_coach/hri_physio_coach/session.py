@@ -44,9 +44,8 @@ from datetime import datetime
 from typing import Any
 
 from hri_physio_bridge import topics
-from hri_physio_bridge.config import ConfigError, add_config_arguments, given_options
+from hri_physio_bridge.config import ConfigError, OneLineErrorParser, add_config_arguments, given_options
 from hri_physio_bridge.launcher import ManagedProcess, ProcessGroup
-from hri_physio_bridge.node_runner import OneLineErrorParser
 from hri_physio_bridge.ros_tools import BackgroundNode, clock_message
 from hri_physio_bridge.stop_signals import install_stop_handlers
 from hri_physio_bridge.waiting import wait_until
