@@ -199,3 +199,11 @@ def test_a_replayed_capture_stands_in_for_the_strap(tmp_path: Path) -> None:
 def test_bad_sources_are_one_clear_error(options: dict, message: str) -> None:
     with pytest.raises(ConfigError, match=message):
         SessionConfig.from_mapping(options, "command line")
+
+
+@pytest.mark.parametrize(("speed", "frame"), [(1.0, 13), (0.5, 13), (30.0, 390), (60.0, 780)])
+def test_ecg_frames_carry_a_tenth_of_a_wall_second_at_any_speed(tmp_path: Path, speed: float,
+                                                                 frame: int) -> None:
+    p, _ = plan(tmp_path, speed=speed)
+    assert p.node(ECG_RECEIVER).config.output_frame == frame
+    assert p.node(HR_RECEIVER).config.output_frame == 1

@@ -205,7 +205,10 @@ def plan_session(options: SessionConfig, folder: SessionFolder, device_id: str,
     # the recorder and (strap source) the coach; ECG to the processor and the recorder.
     streams = [(HR_RECEIVER, "HR", topics.POLAR_H10_HR, 1, 1.0, 1 + record + (options.hr_source == "strap"))]
     if not options.no_ecg:
-        streams.append((ECG_RECEIVER, "ECG", topics.POLAR_H10_ECG, 13, 130.0, 1 + record))
+        # ECG frames of 0.1 s of wall time (13 samples at 1x): at 30x that is 10 frames a second, not 300,
+        # which the processor's and the recorder's subscriptions take with ease on a loaded machine.
+        ecg_frame = max(13, round(13 * options.speed))
+        streams.append((ECG_RECEIVER, "ECG", topics.POLAR_H10_ECG, ecg_frame, 130.0, 1 + record))
     for name, stream, topic, frame, rate, listeners in streams:
         values: dict[str, Any] = {
             "input": f"lsl:PolarH10/{device_id}/{stream}", "output": f"ros:{topic}", "output_frame": frame,
