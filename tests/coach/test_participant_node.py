@@ -82,7 +82,7 @@ def test_the_participant_streams_on_lsl_and_follows_the_robot(ros_context: Any, 
     from rclpy.node import Node
     from std_msgs.msg import String
 
-    from hri_physio_bridge.qos import command_qos
+    from hri_physio_bridge.qos import command_qos, event_qos
     from hri_physio_bridge.ros_tools import ExecutorThread
 
     node = Node("participant_test_probe", context=ros_context)
@@ -95,6 +95,7 @@ def test_the_participant_streams_on_lsl_and_follows_the_robot(ros_context: Any, 
 
     node.create_subscription(String, topics.PARTICIPANT_STATE, on_state, 100)
     commands = node.create_publisher(String, topics.QT_COMMANDS, command_qos())
+    events = node.create_publisher(String, topics.COACH_EVENTS, event_qos())
     spinner = ExecutorThread(node, context=ros_context)
     try:
         with NodeProcess("simulated_participant", "--name-prefix", lsl_name, "--seed", "4") as person:
@@ -115,6 +116,15 @@ def test_the_participant_streams_on_lsl_and_follows_the_robot(ros_context: Any, 
             wait_until(lambda: (latest()["activity"], latest()["tempo_bpm"]) == ("marching", 130.0), 30,
                        lambda: f"marching at 130 BPM; last state {latest()}")
             assert latest()["gesture_speed"] == 1.05
+            # The coach's session start: the seeded model takes over on a whole second from then.
+            assert latest()["session_model_t0"] is None
+            start = latest()["t"]
+            wait_until(lambda: events.get_subscription_count() >= 1, 30, "the participant on the events")
+            events.publish(String(data=json.dumps({"t": start, "event": "session_start"})))
+            wait_until(lambda: latest()["session_model_t0"] is not None, 30,
+                       lambda: f"the session model; last state {latest()}")
+            assert start <= latest()["session_model_t0"] <= start + 10.0
+            assert latest()["activity"] == "marching"  # the person keeps doing what the robot asked
             assert person.stop(signal.SIGTERM) == 0, person.output
         assert "Traceback" not in person.output
     finally:

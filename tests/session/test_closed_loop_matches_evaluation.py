@@ -4,25 +4,38 @@
 qt_physio_coach -> qt_controller -> mock_qt_robot under sim time; its coach events are read back
 from the session's bag. The evaluation (:func:`~hri_physio_coach.evaluate.simulation.simulate_session`)
 is given what ran, read from the session folder's ``configs/``: the participant's model parameters
-and seed, and the coach's options and seed. The two must make the same control changes (action,
-ladder step, activity cost, in order), each within ``TOLERANCE_S`` of the other
-(:func:`~hri_physio_coach.evaluate.compare.compare_changes`).
+and seed, and the coach's options and seed. The participant is the demo's (``hri_physio_session``'s
+defaults: age 33, participant seed 1). The two must make the same control changes (action, ladder
+step, activity cost, in order) at the same rule update (``TOLERANCE_S``,
+:func:`~hri_physio_coach.evaluate.compare.compare_changes`).
 
-Tolerance, and why not an exact match:
+Why they can match: the closed loop's participant rests on a separate random stream during the
+session's start-up and starts its seeded model when it hears the coach's ``session_start``
+(docs/PARTICIPANT_MODEL.md, "Before the session"), as the evaluation starts it. What is left is
+transport: the hand-over lands on the next fitting second of the strap's streams after the event
+arrives, robot commands reach the participant and heart rate reaches the coach a little later than
+in the evaluation (0.1 s there).
 
-* times: ``TOLERANCE_S`` = 30 s, one rule period. Transport (LSL, ROS 2, a loaded 2-core machine at
-  60x) delays the heart rate reaching the coach and the robot's commands reaching the participant
-  (measured: the warm-up's first gesture reached the participant 7 s and 31 s of sim time after the
-  coach sent it, in two runs), so a decision near a threshold may fall one rule update earlier or later.
-* the heart's noise: the closed loop's participant starts with the first ``/clock`` and sits for the
-  start-up (a variable 14-16 min of sim time at 60x, measured) before 'start', drawing from its
-  seeded RNG all that time, so its noise during the session is another realisation of the same seed.
-  The evaluation starts the model at the session start. So only decisions robust to the noise
-  realisation and to that delay can be compared exactly: this participant (age 20, defaults
-  otherwise) is one for whom the evaluation takes the same decisions for 30 of 32 (seed 1-8, HR
-  latency 0.1-30 s) pairs. The 30-s mean HR of a rule update differs between the two by -0.2 bpm on
-  average, up to 7 bpm at a phase change (measured). An age-33 participant does not match: its plan
-  at the conditioning's start (5.8 or 6.3 MET) and a slow-down at 480 s turn on the noise.
+Measured (issue 14, shared 2-core machine): at 20x, 4 runs of about 95 s each; hand-over 0.4-2.0 s
+of sim time after ``session_start``; gestures seen by the participant 0.1-2.8 s of sim time after the
+coach sent them (its state is 1 Hz); calibrated HR_rest within 0.07 bpm of the evaluation's; the
+30-s mean HR of the 39 rule updates differed by +0.02 to +0.12 bpm on average, at most 0.36 bpm
+(run alone) and 1.0-1.7 bpm (with another helper's test suite loading the machine, load 5-7).
+Three runs took the evaluation's control changes at the same times; the fourth (load 7) did not.
+
+Why it stays opt-in: this person's conditioning plan at 420 s is a knife edge. The evaluation's
+30-s mean there is 119.5 bpm and its plan moves to another ladder step below about 118.2 bpm
+(evaluation with an HR latency of 2.5 s instead of 0.1 s). HR rises steeply then (step-ups from
+360 s), so a command or heart-rate delay of 2-3 s of sim time, which a loaded machine gives at 20x,
+moves the plan (measured: 117.7 bpm at 60x, 118.5 and 119.35 at 20x, a flip in the loaded run).
+The noise no longer differs; the transport's delay does. Slower sim time (10x) would halve that
+delay; it was not measured.
+
+* ``SPEED`` = 20x, not 60x: at 60x the participant's 0.1-s ticks (600 a second) do not keep up on a
+  loaded 2-core machine, commands reached it 3-12 s of sim time late and the 30-s means were
+  1.0 bpm lower on average (up to 2.9 bpm), which flipped that plan.
+* ``TOLERANCE_S`` = 1 s: rule updates fall every 30 s from the session start in both, so the same
+  decision has the same time; a decision one rule update apart is a difference.
 
 The test can fail: the same recording is checked against the evaluation of another policy
 (threshold) and of another person (age 50), which take other decisions.
@@ -47,19 +60,18 @@ from hri_physio_coach.report.bagdata import read_bag
 
 pytestmark = [
     pytest.mark.integration, pytest.mark.ros, pytest.mark.lsl,
-    # Not yet reliable: the closed loop's participant draws noise while the session starts up, so its
-    # decisions can differ from the evaluation's (seen once in a full run). Opt in until the participant
-    # model starts at the session's start (open work of issue 14).
+    # Opt-in: the demo participant's plan at 420 s turns on ~1 bpm, which transport delays on a loaded
+    # machine can move (see the module docstring; 3 of 4 runs matched at 20x).
     pytest.mark.skipif(os.environ.get("HRI_PHYSIO_E2E_EVALUATION") != "1",
-                       reason="set HRI_PHYSIO_E2E_EVALUATION=1: not yet reliable (see module docstring)"),
+                       reason="set HRI_PHYSIO_E2E_EVALUATION=1: a knife-edge decision (module docstring)"),
 ]
 
 POLICY = "predictive"
-AGE = 20.0
+AGE = 33.0
 PARTICIPANT_SEED = 1
-SPEED = 60.0
-#: One rule period: see the module docstring.
-TOLERANCE_S = 30.0
+SPEED = 20.0  # see the module docstring
+#: The same rule update: see the module docstring.
+TOLERANCE_S = 1.0
 
 
 def evaluation_spec(folder: Path, policy: str = POLICY,
@@ -102,6 +114,17 @@ def test_the_evaluation_runs_the_participant_and_coach_that_ran(session: Path) -
     spec, coach = evaluation_spec(session)
     assert (spec.params.age, spec.participant_seed, spec.policy) == (AGE, PARTICIPANT_SEED, POLICY)
     assert coach.seed == spec.coach_seed
+
+
+def test_the_participants_seeded_model_starts_with_the_session(session: Path) -> None:
+    bag = read_bag(session / "bag")
+    start = next(m.data["t"] for m in bag.json[topics.COACH_EVENTS] if m.data.get("event") == "session_start")
+    states = [m.data for m in bag.json[topics.PARTICIPANT_STATE]]
+    assert states[0]["session_model_t0"] is None  # resting on the pre-session stream first
+    handover = states[-1]["session_model_t0"]
+    # At or after the start, before the seated calibration that opens the session ends.
+    _, coach = evaluation_spec(session)
+    assert handover is not None and start <= handover < start + coach.calib_time, (start, handover)
 
 
 def test_the_closed_loop_takes_the_evaluations_decisions(session: Path) -> None:

@@ -1,7 +1,7 @@
 """``simulated_participant``'s options, declared once (no rclpy, no pylsl: checkable before launch).
 
 The model parameters are those of :class:`~hri_physio_coach.participant.physiology.ParticipantParams`
-(defaults taken from it, PARTICIPANT_MODEL.md explains them); the model's own cross-checks
+(defaults taken from it, docs/PARTICIPANT_MODEL.md explains them); the model's own cross-checks
 (``hr_rest < hr_max_true``, ...) run in the validator, so a bad value is one
 :class:`~hri_physio_bridge.config.ConfigError` line naming the option.
 """
@@ -57,6 +57,9 @@ class ParticipantNodeConfig(NodeConfig):
     command_topic: str = option(topics.QT_COMMANDS, "robot command lines the participant follows",
                                 min_length=1)
     state_topic: str = option(topics.PARTICIPANT_STATE, "the model's true state (JSON, 1 Hz)", min_length=1)
+    session_events_topic: str = option(topics.COACH_EVENTS, "the coach's events: its 'session_start' starts "
+                                       "the seeded session model (until then the person rests on another "
+                                       "random stream)", min_length=1)
     audio_status_topic: str = option(topics.AUDIO_STATUS, "the audio streamer's status (JSON): the tempo "
                                      "it reports as playing is the one the participant follows (without "
                                      "it, the tempo named in 'set audio' commands)", min_length=1)

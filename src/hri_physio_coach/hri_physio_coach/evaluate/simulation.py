@@ -8,6 +8,11 @@ Here the same three objects are joined directly: every command line the coach se
 the observer, every 1 Hz heart rate the strap reports reaches the coach ``hr_latency``
 seconds later, and time jumps from one due thing (a coach timer, a heart-rate sample) to the
 next. No second implementation: only the transport is left out.
+
+The participant's model starts with the session (kinetics at rest, its seed's session random
+stream from the first draw): the closed loop's participant rests on another stream until the
+coach's ``session_start`` and then runs this same :func:`~hri_physio_coach.participant.stream.session_model`
+(docs/PARTICIPANT_MODEL.md, "Before the session").
 """
 
 from __future__ import annotations
@@ -21,9 +26,9 @@ import numpy as np
 
 from hri_physio_coach.coach import ExerciseCoach, load_coach_routine
 from hri_physio_coach.config import CoachConfig
-from hri_physio_coach.participant.cardiac import ParticipantSimulator
 from hri_physio_coach.participant.perception import RobotObserver
 from hri_physio_coach.participant.physiology import ParticipantParams
+from hri_physio_coach.participant.stream import session_model
 from hri_physio_coach.routine import Routine
 
 #: Heart-rate samples travel strap -> LSL -> receiver -> coach; this is their delay (s) here.
@@ -86,7 +91,7 @@ def simulate_session(spec: SessionSpec, base: CoachConfig | None = None) -> Sess
     """Run one whole session; returns its events, decisions and per-second traces."""
     cfg = coach_config(spec, base)
     routine = session_routine(cfg)
-    sim = ParticipantSimulator(spec.params, seed=spec.participant_seed, ecg=False)
+    sim = session_model(spec.params, spec.participant_seed, 0.0, ecg=False)
     observer = RobotObserver()
     clock = [0.0]
 

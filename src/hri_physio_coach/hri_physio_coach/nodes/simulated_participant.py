@@ -3,10 +3,14 @@
 Listens to the robot commands on /QtController/input (gesture, gesture speed) and to the music
 the audio streamer reports as playing on /audio_streamer/status (its tempo: what the person hears;
 until a status arrives, e.g. with no streamer running, the tempo named in ``set audio``),
-runs the heart-rate model of PARTICIPANT_MODEL.md on ROS time (so it follows /clock under
+runs the heart-rate model of docs/PARTICIPANT_MODEL.md on ROS time (so it follows /clock under
 use_sim_time), and streams what a Polar H10 would: ECG (130 Hz), HR (1 Hz) and RR intervals
 on LSL, named ``[<name_prefix>/]PolarH10/<device_id>/<ECG|HR|RR>``. Its true model state goes
 to /participant/state (JSON) for evaluation.
+
+Until the coach's ``session_start`` on /coach/events the person rests on a separate random
+stream; from then the model runs from its seed as ``hri_physio_evaluate`` runs it
+(:class:`~hri_physio_coach.participant.stream.StrapStream`; the streams stay continuous).
 
 Examples::
 
@@ -32,8 +36,8 @@ from hri_physio_bridge.node_runner import ManagedNode, run_node
 from hri_physio_bridge.qos import command_qos, event_qos
 from hri_physio_bridge.streamers.base import StreamerError, StreamSpec
 from hri_physio_bridge.streamers.lsl import LslStreamer
-from hri_physio_coach.participant.cardiac import ParticipantSimulator
 from hri_physio_coach.participant.perception import RobotObserver
+from hri_physio_coach.participant.stream import StrapStream
 from hri_physio_coach.participant_config import PARTICIPANT_NODE, ParticipantNodeConfig
 
 PROG = PARTICIPANT_NODE
@@ -46,10 +50,11 @@ class SimulatedParticipantNode(ManagedNode):
         super().__init__(PROG, **kwargs)
         self.config = cfg = self.declare_config(config)
         self.params = cfg.params
-        # The model starts at the first tick with a valid ROS time: under use_sim_time that is
+        # The streams start at the first tick with a valid ROS time: under use_sim_time that is
         # 0 until the first /clock message, and starting then would make the first step jump
         # from 0 to the clock's epoch.
-        self.sim: ParticipantSimulator | None = None
+        self.strap: StrapStream | None = None
+        self._session_start: float | None = None  # heard before the streams started
         self.lsl_offset = 0.0
         self.observer = RobotObserver()
         self._lock = threading.Lock()  # ticks (executor thread) and close (main thread)
@@ -66,6 +71,7 @@ class SimulatedParticipantNode(ManagedNode):
         self.state_pub = self.create_publisher(String, cfg.state_topic, event_qos(100))
         self.create_subscription(String, cfg.command_topic, self._on_command, command_qos())
         self.create_subscription(String, cfg.audio_status_topic, self._on_audio_status, event_qos())
+        self.create_subscription(String, cfg.session_events_topic, self._on_coach_event, event_qos())
         self._said_tempo_from_commands = False
         self.create_timer(cfg.update_period, self._tick)
         self._last_state = 0.0
@@ -78,16 +84,39 @@ class SimulatedParticipantNode(ManagedNode):
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 
-    def _start_model(self, now: float) -> ParticipantSimulator:
+    def _start_model(self, now: float) -> StrapStream:
         cfg = self.config
-        self.sim = ParticipantSimulator(self.params, seed=cfg.seed, ecg_rate=cfg.ecg_rate, t0=now)
-        self.sim.set_activity(self.observer.activity)
+        self.strap = StrapStream(self.params, cfg.seed, now, ecg_rate=cfg.ecg_rate)
+        self.strap.set_activity(self.observer.activity)
+        if self._session_start is not None:
+            self.strap.start_session(self._session_start)
         # LSL timestamps: model (ROS) time shifted onto the LSL clock at start-up, so in real
         # time they are ordinary LSL timestamps and under /clock they advance with sim time.
         self.lsl_offset = pylsl.local_clock() - now
         self._last_state = now
-        self.get_logger().info(f"model started at ROS time {now:.3f} s")
-        return self.sim
+        self.get_logger().info(f"model started at ROS time {now:.3f} s (at rest until the session starts)")
+        return self.strap
+
+    def _on_coach_event(self, msg: String) -> None:
+        try:
+            event = json.loads(msg.data)
+        except ValueError:
+            return
+        if not isinstance(event, dict) or event.get("event") != "session_start":
+            return
+        t = event.get("t")
+        if not isinstance(t, int | float) or isinstance(t, bool):
+            self.get_logger().warning(f"a session_start without a time on {self.config.session_events_topic}")
+            return
+        with self._lock:
+            if self.strap is None:
+                self._session_start = float(t)
+                return
+            if self.strap.start_session(float(t)):
+                self.get_logger().info(f"session started at ROS time {float(t):.3f} s: the seeded model "
+                                       "takes over at the next fitting second")
+            else:
+                self.get_logger().info("another session_start: the model keeps running (one per participant)")
 
     def _on_command(self, msg: String) -> None:
         with self._lock:
@@ -117,8 +146,8 @@ class SimulatedParticipantNode(ManagedNode):
                 self._apply_activity()
 
     def _apply_activity(self) -> None:
-        if self.sim is not None:
-            self.sim.set_activity(self.observer.activity)
+        if self.strap is not None:
+            self.strap.set_activity(self.observer.activity)
         self.get_logger().info(f"now doing {self.observer.activity}")
 
     def _push(self, kind: str, t: np.ndarray, values: np.ndarray) -> None:
@@ -132,19 +161,25 @@ class SimulatedParticipantNode(ManagedNode):
             now = self._now()
             if now <= 0.0:
                 return  # use_sim_time and no /clock yet
-            sim = self.sim if self.sim is not None else self._start_model(now)
-            if now <= sim.t:
+            strap = self.strap if self.strap is not None else self._start_model(now)
+            if now <= strap.t:
                 return  # sim time paused or went backwards (a replay restarted): wait
-            out = sim.advance(now)
+            was_in_session = strap.in_session
+            out = strap.advance(now)
+            if strap.in_session and not was_in_session:
+                self.get_logger().info(f"seeded session model running from ROS time {strap.session_t0:.3f} s"
+                                       + ("" if strap.bridged else " (no bridging beat found: one odd beat)"))
             self._push("ECG", out.ecg_t, out.ecg_mv)
             self._push("HR", out.hr_t, out.hr_bpm)
             self._push("RR", out.rr_t, out.rr_s * 1000.0)
             if now - self._last_state >= 1.0:
                 self._last_state = now
-                a = sim.activity
+                model = strap.sim
+                a = model.activity
                 self.state_pub.publish(String(data=json.dumps({
-                    "t": now, "hr_model": sim.hr, "fraction_hrr": sim.kinetics.fraction_hrr,
+                    "t": now, "hr_model": model.hr, "fraction_hrr": model.kinetics.fraction_hrr,
                     "activity": a.name, "tempo_bpm": a.tempo_bpm, "gesture_speed": a.gesture_speed,
+                    "session_model_t0": strap.session_t0,
                 })))
 
     def close(self) -> None:

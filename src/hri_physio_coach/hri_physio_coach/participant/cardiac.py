@@ -1,4 +1,4 @@
-"""Beats and ECG from the simulated heart rate (PARTICIPANT_MODEL.md, "Beat-to-beat RR and ECG").
+"""Beats and ECG from the simulated heart rate (docs/PARTICIPANT_MODEL.md, "Beat-to-beat RR and ECG").
 
 NeuroKit2's ``ecg_simulate`` only takes a constant heart rate, so the ECG is
 synthesised from the beat series itself, ECGSYN-style: the cardiac phase
@@ -27,6 +27,9 @@ from hri_physio_coach.participant.physiology import (
 )
 
 TWO_PI = 2.0 * math.pi
+#: Random streams of one seed: the session's (what the evaluation draws) and the one before it.
+SESSION_STREAM = 0
+PRE_SESSION_STREAM = 0x5E55
 # (phase of the wave centre in rad, width in rad at 60 bpm, amplitude in mV) for P, Q, R, S, T.
 WAVES = np.array([
     (-math.pi / 3.0, 0.25, 0.15),
@@ -72,16 +75,25 @@ class ParticipantSimulator:
     ``ecg=False`` leaves the ECG out (evaluations only need the strap's HR and RR). The ECG
     noise has its own random stream, so the beats, RR and HR of a seed are the same with or
     without ECG and however the time is cut into :meth:`advance` calls.
+
+    ``stream`` picks another random stream of the same seed (0, the default, is the session's;
+    :data:`PRE_SESSION_STREAM` is the one a participant rests on before the session starts).
+    ``previous_beat`` (ECG only) is the last beat already shown when this model takes over from
+    another one: the ECG runs from it to this model's first beat instead of an invented one.
+    Neither changes which numbers the model draws, so the session's beats stay those of the seed.
     """
 
     def __init__(self, params: ParticipantParams, seed: int = 0, ecg_rate: float = 130.0,
-                 dt: float = 0.1, t0: float = 0.0, noise_mv: float = 0.01, ecg: bool = True) -> None:
+                 dt: float = 0.1, t0: float = 0.0, noise_mv: float = 0.01, ecg: bool = True,
+                 stream: int = SESSION_STREAM, previous_beat: float | None = None) -> None:
         if ecg_rate <= 0:
             raise ValueError(f"ecg_rate must be > 0, got {ecg_rate}")
         self.p = params
+        self.seed = seed
         self.kinetics = HeartRateKinetics(params, dt)
-        self.rng = np.random.default_rng(seed)
-        self._ecg_rng = np.random.default_rng([seed, 0xEC6])
+        self.rng = np.random.default_rng(seed if stream == SESSION_STREAM else [seed, stream])
+        self._ecg_rng = np.random.default_rng([seed, 0xEC6] if stream == SESSION_STREAM
+                                              else [seed, 0xEC6, stream])
         self.ecg = ecg
         self.ecg_rate = ecg_rate
         self.noise_mv = noise_mv
@@ -93,6 +105,9 @@ class ParticipantSimulator:
         rr0 = 60.0 / params.hr_rest
         self._next_beat = t0 + float(self.rng.uniform(0.0, rr0))
         self._interval = (self._next_beat - rr0, rr0)  # the beat interval the ECG is in
+        self._first_beat = self._next_beat
+        if previous_beat is not None and previous_beat < self._next_beat:
+            self._interval = (previous_beat, self._next_beat - previous_beat)
         self._have_beat = False  # the first beat has no RR interval to report
         self._lf_phase = float(self.rng.uniform(0, TWO_PI))
         self._hf_phase = float(self.rng.uniform(0, TWO_PI))
@@ -106,6 +121,21 @@ class ParticipantSimulator:
     @property
     def hr(self) -> float:
         return self.kinetics.hr
+
+    @property
+    def first_beat(self) -> float:
+        """When this model's first beat falls (drawn at creation, from the seed)."""
+        return self._first_beat
+
+    @property
+    def last_beat(self) -> float:
+        """The latest beat the model has reached (its ECG is in the interval that starts there)."""
+        return self._interval[0]
+
+    @property
+    def rr_in_progress(self) -> float:
+        """The interval the heart is in: from :attr:`last_beat` to the next beat it has drawn."""
+        return self._interval[1]
 
     def set_activity(self, activity: Activity) -> None:
         self.kinetics.set_activity(activity)

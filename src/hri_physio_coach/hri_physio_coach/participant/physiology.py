@@ -1,9 +1,9 @@
-"""A simulated exercise participant: demand -> heart-rate kinetics (PARTICIPANT_MODEL.md).
+"""A simulated exercise participant: demand -> heart-rate kinetics (docs/PARTICIPANT_MODEL.md).
 
 Demand comes from what the robot asks for (activity, music tempo, gesture
 speed) through the ACSM stepping equation; heart rate follows it with a fast
 (neural) and a slow component with dead time, plus cardiac drift. Parameters
-marked "assumed" in PARTICIPANT_MODEL.md are fields here so studies can sweep them.
+marked "assumed" in docs/PARTICIPANT_MODEL.md are fields here so studies can sweep them.
 No clock is read: the caller advances the model by explicit time steps.
 """
 
@@ -66,7 +66,7 @@ class ParticipantParams:
 
 def sample_population(n: int, seed: int, age_range: tuple[float, float] = (20.0, 50.0)
                       ) -> list[ParticipantParams]:
-    """A seeded cohort drawn from the distributions of PARTICIPANT_MODEL.md."""
+    """A seeded cohort drawn from the distributions of docs/PARTICIPANT_MODEL.md."""
     rng = np.random.default_rng(seed)
     people = []
     for _ in range(n):
