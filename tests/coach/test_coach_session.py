@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import time
@@ -10,7 +11,7 @@ from typing import Any
 
 import pytest
 
-from hri_physio_coach.coach import ExerciseCoach
+from hri_physio_coach.coach import ExerciseCoach, shipped_gesture_durations
 from hri_physio_coach.config import CoachConfig
 
 CALIB, WARM, COND, COOL, END = 0.0, 180.0, 480.0, 1080.0, 1380.0
@@ -147,21 +148,64 @@ def test_every_activity_video_then_splash_gesture_music_and_instruction(session:
 def test_gesture_speed_and_music_tempo_follow_the_ladder(session: Session) -> None:
     speeds = {0.90: "110", 0.95: "115", 1.00: "120", 1.05: "125", 1.10: "130", 1.15: "135"}
     gestures = [(t, float(c.split()[-1])) for t, c in session.sent("set gesture") if "base" not in c]
-    audios = {t: c for t, c in session.sent("set audio ./audio/exercise_")}
-    for t, speed in gestures:
-        assert audios[t] == f"set audio ./audio/exercise_{speeds[round(speed, 2)]}.wav"
+    audios = session.sent("set audio ./audio/exercise_")
+    for t, speed in gestures:  # every play, repetitions too, at the tempo of the music playing then
+        playing = [c for ta, c in audios if ta <= t][-1]
+        assert playing == f"set audio ./audio/exercise_{speeds[round(speed, 2)]}.wav"
     assert gestures[0] == (WARM, 0.95)  # speed_idx 1
+
+
+def test_the_activity_gesture_repeats_for_the_whole_activity_at_the_current_speed(session: Session) -> None:
+    durations = shipped_gesture_durations()
+    ends = [float(start) for start, _, _ in ACTIVITIES[1:]] + [END]
+    for (start, _, gesture), end in zip(ACTIVITIES, ends, strict=True):
+        plays = [(t, float(c.split()[-1])) for t, c in session.sent("set gesture ") if start <= t < end]
+        assert all(c.startswith(f"set gesture {gesture} ") for t, c in session.sent("set gesture ")
+                   if start <= t < end)
+        assert plays[0][0] == start
+        # Each play starts when the last one ends (or sooner, at a speed change), until the activity ends.
+        for (t0, speed), (t1, _) in itertools.pairwise(plays):
+            assert 0 < t1 - t0 <= durations[gesture] / speed + session.step
+        assert end - plays[-1][0] <= durations[gesture] / plays[-1][1] + session.step
+        longest = durations[gesture] / min(s for _, s in plays) + session.step  # ticks come every step
+        assert len(plays) >= (end - start) / longest - 1
+    # Calibration's gesture (a fixed speed) plays once; nothing is repeated after the session.
+    assert [t for t, c in session.sent("set gesture base")] == [0.0]
+    assert not [t for t, _ in session.sent("set gesture") if t >= END]
+
+
+def test_calibration_shows_encouraging_faces_in_turn(session: Session) -> None:
+    faces = session.of("behaviour", kind="encouragement")
+    assert [e["t"] for e in faces] == [45.0, 90.0, 135.0]  # every calib_face_period while seated
+    assert [e["emotion"] for e in faces] == ["showing_smile", "happy_blinking", "happy"]
+    for e in faces:
+        assert (e["t"], f"set emotion {e['emotion']}") in session.commands
+
+
+def test_the_warm_up_opens_with_moving_the_chair_and_bringing_the_step(session: Session) -> None:
+    said = [c for t, c in session.sent("set speech") if WARM <= t < WARM + 30]
+    first = next(i for i, c in enumerate(said) if "chair" in c)
+    assert "stepping platform" in said[first]
+    assert all("follow my lead" not in c for c in said[:first])
+
+
+def test_gesture_repeat_can_be_off() -> None:
+    off = Session(pilot_hr, gesture_repeat=False).run(until=WARM + 170)
+    changes = [e["t"] for e in off.of("rule_update") if e["decision"]["changed"]]
+    plays = [t for t, _ in off.sent("set gesture marching")]
+    assert plays[0] == WARM and plays[1:] == changes  # at the activity's start and at a speed change only
+    assert not off.of("command", why="gesture repeat")
 
 
 def test_behaviours_every_20_s_and_rule_updates_every_30_s(session: Session) -> None:
     rules = session.times("rule_update")
     assert rules == [WARM + 30.0 * k for k in range(1, 40)]  # 210 ... 1350
-    behaviours = [e["t"] for e in session.of("behaviour") if e["kind"] != "reminder"]
+    behaviours = [e["t"] for e in session.of("behaviour") if e["kind"] not in ("reminder", "encouragement")]
     slots = [WARM + 20.0 * k for k in range(1, 60)]  # 200 ... 1360
     assert behaviours == [t for t in slots if t not in rules]
     assert session.times("hook_skipped") == [t for t in slots if t in rules]  # the rule update wins
     kinds = {e["kind"] for e in session.of("behaviour")}
-    assert kinds == {"motivation", "emotion", "hr_report", "reminder"}
+    assert kinds == {"motivation", "emotion", "hr_report", "reminder", "encouragement"}
     for e in session.of("behaviour", kind="hr_report"):
         spoken = float(e["text"].split()[-4])  # "... was 131 beats per minute."
         assert "beats per minute" in e["text"] and e["hr"] == pytest.approx(spoken, abs=0.5)
@@ -344,9 +388,17 @@ def test_thesis_fixes_through_the_coach() -> None:
 def test_a_faster_clock_step_gives_the_same_session() -> None:
     fine = Session(pilot_hr, step=0.25).run()
     coarse = Session(pilot_hr, step=1.0).run()
-    key = lambda s: [(e["t"], e["event"], e.get("activity"), e.get("kind")) for e in s.events]  # noqa: E731
+    # A repeated gesture starts at the first tick after the last one ended: that depends on the step.
+    def key(s: Session) -> list[tuple]:
+        return [(e["t"], e["event"], e.get("activity"), e.get("kind")) for e in s.events
+                if e.get("why") != "gesture repeat"]
+
+    def commands(s: Session) -> list[str]:
+        repeats = {(e["t"], e["command"]) for e in s.of("command", why="gesture repeat")}
+        return [c for t, c in s.commands if (t, c) not in repeats]
+
     assert key(fine) == key(coarse)
-    assert [c for _, c in fine.commands] == [c for _, c in coarse.commands]
+    assert commands(fine) == commands(coarse)
     assert math.isclose(fine.of("zone")[0]["low"], coarse.of("zone")[0]["low"])
 
 

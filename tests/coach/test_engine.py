@@ -194,3 +194,20 @@ def test_load_routine_file_errors(tmp_path: Path) -> None:
     bad.write_text("phases: [\n  - name: x\n")
     with pytest.raises(RoutineError, match="not valid YAML at line"):
         load_routine(bad)
+
+
+def test_an_unquoted_comma_in_a_flow_mapping_is_named(tmp_path: Path) -> None:
+    bad = tmp_path / "comma.yaml"
+    bad.write_text("name: r\nphases:\n  - name: p\n    activities:\n"
+                   "      - {name: a, label: step-up, reach and pull, duration: 10}\n")
+    with pytest.raises(RoutineError, match=r"activity 'a': 'reach and pull' has no value.*quote the value"):
+        load_routine(bad)
+
+
+def test_the_packaged_routine_labels_are_whole() -> None:
+    from hri_physio_coach.coach import load_coach_routine
+    from hri_physio_coach.config import CoachConfig
+
+    routine = load_coach_routine(CoachConfig())
+    labels = {a.label for p in routine.phases for a in p.activities}
+    assert "step-up, reach and pull" in labels and "step-up" not in labels

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 from hri_physio_coach import gates
@@ -30,12 +32,12 @@ def test_sim_clock_steps_keep_up_with_the_wall_clock_at_its_speed() -> None:
 
 def test_view_counts_adaptations_gated_updates_and_time_in_zone() -> None:
     view = SessionView()
-    view.on_hr(85.0, 9.0)  # before the session: seen, not counted
+    view.on_hr(85.0, 9.0, 9.0)  # before the session: seen, not counted
     view.on_event({"t": 10.0, "event": "session_start"})
     view.on_event({"t": 190.0, "event": "zone", "low": 125.0, "high": 155.0})
     view.state = {"phase": "warm_up", "phase_kind": "warm_up", "activity": "marching"}
     for i, bpm in enumerate((120.0, 130.0, 140.0, 160.0)):
-        view.on_hr(bpm, 200.0 + i)
+        view.on_hr(bpm, 200.0 + i, 200.0 + i)
     view.on_event({"t": 220.0, "event": "rule_update", "decision": {"changed": True, "action": "speed_up"}})
     for n in (4, 6):
         view.on_event({"t": 250.0, "event": "rule_update",
@@ -65,15 +67,17 @@ def test_view_counts_adaptations_gated_updates_and_time_in_zone() -> None:
 
 def test_hr_samples_are_counted_by_sample_time_not_arrival() -> None:
     view = SessionView()
-    view.on_hr(80.0, 9.5)  # sampled before the start
+    lsl = 5000.0  # the strap's clock runs 5000 s ahead of sim time
+    view.on_hr(80.0, lsl + 9.5, 9.5)  # sampled before the start (delivered at once)
     view.on_event({"t": 10.0, "event": "session_start"})
-    view.on_hr(81.0, 9.9)  # arrives after the start event, sampled before it: not counted
-    view.on_hr(82.0, 10.0)
+    view.on_hr(81.0, lsl + 9.9, 12.0)  # arrives (late) after the start event, sampled before it: not counted
+    view.on_hr(82.0, lsl + 10.0, 12.0)
     assert view.hr_samples == 1
     view.on_event({"t": 20.0, "event": "session_end"})
-    view.on_hr(83.0, 19.5)  # arrives after the end event, sampled inside the session: counted
-    view.on_hr(84.0, 20.0)  # sampled at the end: not counted
+    view.on_hr(83.0, lsl + 19.5, 21.0)  # arrives after the end event, sampled inside the session: counted
+    view.on_hr(84.0, lsl + 20.0, math.nan)  # sampled at the end: not counted
     assert (view.hr_seen, view.hr_samples) == (5, 2)
+    assert view.hr_clock_offset == pytest.approx(lsl)  # from the fastest value
 
 
 def test_every_gate_code_has_a_label() -> None:

@@ -71,7 +71,7 @@ def view_at(phase: str | None, hr: float = 120.0) -> SessionView:
     view.on_event({"t": 100.0, "event": "session_start", "duration": 270.0})
     view.on_event({"t": 160.0, "event": "zone", "low": 125.0, "high": 155.0})
     view.state = {"phase": phase, "activity": "marching", "ladder_speed": 0.95, "ladder_tempo": 115.0}
-    view.on_hr(hr, 190.0)
+    view.on_hr(hr, 190.0, 190.0)
     return view
 
 

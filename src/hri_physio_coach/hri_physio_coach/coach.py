@@ -11,6 +11,7 @@ the name); a rule update that did not adapt says why with a :mod:`~hri_physio_co
 
 from __future__ import annotations
 
+import functools
 import math
 import random
 import string
@@ -55,9 +56,10 @@ from qt_controller.commands import (
     SetVideo,
     SetVolume,
 )
+from qt_controller.gestures import GestureError, GestureLibrary, default_gesture_dir
 
 CALIBRATION = "calibration"
-RULE_UPDATE, BEHAVIOUR, REMINDER = "rule_update", "behaviour", "reminder"
+RULE_UPDATE, BEHAVIOUR, REMINDER, FACE = "rule_update", "behaviour", "reminder", "encouragement"
 BEHAVIOURS = ("motivation", "emotion", "hr_report")
 
 _STRING_VARS = ("name", "video", "gesture", "label", "routine_label", "activity", "phase", "splash", "music",
@@ -73,6 +75,16 @@ def _gesture(name: str, speed: float) -> SetGesture:
 
 class CoachError(ValueError):
     """The routine and the coach do not fit together (unknown placeholder, hook or call)."""
+
+
+@functools.cache
+def shipped_gesture_durations() -> Mapping[str, float]:
+    """Recorded duration (s at speed 1) of each gesture qt_controller ships, by lower-case name."""
+    try:
+        library = GestureLibrary.from_dirs([default_gesture_dir()])
+    except (GestureError, OSError, ModuleNotFoundError):
+        return {}
+    return {name.lower(): library.get(name).duration for name in library.names}
 
 
 def _spoken(bpm: float) -> float:
@@ -120,6 +132,10 @@ class ExerciseCoach(Listener):
         self.hr_rest_source: str | None = None
         self._calibrated_in_phase = False
         self._gesture: tuple[str, bool] | None = None  # (name, follows the ladder)
+        # An exercise gesture is played again each time it ends, until its activity ends.
+        self._gesture_durations = shipped_gesture_durations() if config.gesture_repeat else {}
+        self._gesture_next: float | None = None  # when the gesture playing now ends
+        self._faces = 0
         self._audio_follows_ladder = False
         # Policies that pick activities: what runs in each slot, where the HR buffer starts, notices said.
         self.choice = ActivityChoice(routine)
@@ -134,6 +150,7 @@ class ExerciseCoach(Listener):
             RULE_UPDATE: Hook(RULE_UPDATE, config.rule_period, self._rule_update, priority=10),
             BEHAVIOUR: Hook(BEHAVIOUR, config.behaviour_period, self._behaviour, priority=0),
             REMINDER: Hook(REMINDER, config.calib_reminder_period, self._reminder, priority=5),
+            FACE: Hook(FACE, config.calib_face_period, self._encouraging_face, group="face"),
         }
         self._check_routine(routine)
         try:
@@ -163,6 +180,9 @@ class ExerciseCoach(Listener):
         if self.engine.running:
             self._check_hr_timeout(now)
         self.engine.tick(now)
+        if self.engine.running and self._gesture_next is not None and now >= self._gesture_next:
+            assert self._gesture is not None  # set with _gesture_next
+            self._play_gesture(self._gesture[0], self.ladder.speed, True, "gesture repeat")
 
     def stop(self, reason: str) -> None:
         self.engine.stop(reason)
@@ -334,13 +354,19 @@ class ExerciseCoach(Listener):
                 self._build_failed(f"gesture {value!r} at speed {raw_speed!r}",
                                    "gesture speed must be a number", why)
                 return
-            self._gesture = (value, follows)
-            self.command(_gesture(value, speed), why)
+            self._play_gesture(value, speed, follows, why)
+
+    def _play_gesture(self, name: str, speed: float, follows: bool, why: str) -> None:
+        """Send a gesture; one that follows the ladder is played again when it ends (see :meth:`tick`)."""
+        self._gesture = (name, follows)
+        self.command(_gesture(name, speed), why)
+        duration = self._gesture_durations.get(name.lower()) if follows else None
+        self._gesture_next = None if duration is None else self.engine.now + duration / speed
 
     def _resend_pace(self, why: str, gesture: bool = True) -> None:
         """After a ladder change: the gesture at the new speed, the music at the new tempo."""
         if gesture and self._gesture is not None and self._gesture[1]:
-            self.command(_gesture(self._gesture[0], self.ladder.speed), why)
+            self._play_gesture(self._gesture[0], self.ladder.speed, True, why)
         if self._audio_follows_ladder:
             music = self.cfg.audio_exercise_base.format(self.ladder.suffix)
             self.command(SetAudio(self.cfg.audio_path.format(music)), why)
@@ -367,11 +393,13 @@ class ExerciseCoach(Listener):
             self._emit({"event": "activity_choice", "phase": phase.name, "slot": activity.name,
                         "activity": running.name, "mets": running.mets, "level": self.adapter.level,
                         "reason": "the policy holds another activity cost than the slot's"})
+        self._gesture_next = None  # the last activity's gesture is not repeated into this one
         if phase.kind != CALIBRATION:
             self._gesture = None  # the activity's own actions set its gesture
             self.adapter.observe(t, self._controls(t))
 
     def on_end(self, t: float) -> None:
+        self._gesture_next = None
         self._emit({"event": "summary", "decisions": len(self.decisions),
                     "adaptations": sum(1 for d in self.decisions if d.changed),
                     "final_ladder_index": self.ladder.index})
@@ -407,6 +435,13 @@ class ExerciseCoach(Listener):
         text = self.cfg.speech_calib_reminder.format_map(self._variables())
         self._emit({"event": "behaviour", "kind": "reminder", "text": self._redact(text)})
         self.say(text, "calibration reminder")
+
+    def _encouraging_face(self, t: float) -> None:
+        """Calibration: the robot's faces in turn, to keep the seated participant at ease."""
+        emotion = self.cfg.emotion_calibration[self._faces % len(self.cfg.emotion_calibration)]
+        self._faces += 1
+        self._emit({"event": "behaviour", "kind": "encouragement", "emotion": emotion})
+        self.command(SetEmotion(emotion), "calibration encouragement")
 
     def _behaviour(self, t: float) -> None:
         kind = self.rng.choice(BEHAVIOURS)
@@ -545,8 +580,7 @@ class ExerciseCoach(Listener):
             self.engine.schedule(self.engine.now + self.cfg.video_time, splash, "video:splash")
         self.say(self.rng.choice(self.cfg.speech_activity_switch).format_map(variables), why)
         if gesture:
-            self._gesture = (str(gesture), True)
-            self.command(_gesture(str(gesture), self.ladder.speed), why)
+            self._play_gesture(str(gesture), self.ladder.speed, True, why)
         return True
 
     def _say_out_of_reach(self, decision: Decision) -> None:

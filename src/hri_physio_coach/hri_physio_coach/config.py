@@ -31,7 +31,7 @@ __all__ = ["COACH_NODE", "CoachConfig", "CoachNodeConfig", "ConfigError", "load_
 COACH_NODE = "qt_physio_coach"
 PolicyName = Literal[POLICY_NAMES]  # type: ignore[valid-type]
 _SPEECH_LISTS = ("speech_relaxation", "speech_motivation", "speech_faster", "speech_slower",
-                 "speech_cooldown", "emotion_motivation", "speech_activity_switch")
+                 "speech_cooldown", "emotion_motivation", "emotion_calibration", "speech_activity_switch")
 _NAME_TEMPLATES = ("audio_path", "video_path", "audio_exercise_base")
 
 
@@ -62,6 +62,10 @@ class CoachConfig(NodeConfig):
                                     unit="samples", ge=1)
     calib_reminder_period: float = option(60.0, "time between 'breathe / time left' reminders",
                                           unit="s", gt=0)
+    calib_face_period: float = option(45.0, "time between encouraging faces during the calibration",
+                                      unit="s", gt=0)
+    emotion_calibration: list[str] = option(["showing_smile", "happy_blinking", "happy"],
+                                            "encouraging faces of the calibration, in turn", min_length=1)
     # --- heart-rate zone -----------------------------------------------------------------------
     zone_low: float = option(0.40, "lower zone bound as a fraction of the heart-rate reserve (HRR40)",
                              ge=0, le=1)
@@ -89,6 +93,9 @@ class CoachConfig(NodeConfig):
     gesture_relaxing: str = option("base", "gesture of the calibration")
     gesture_relaxing_speed: float = option(0.5, "speed of the calibration gesture",
                                            ge=GESTURE_SPEED_RANGE[0], le=GESTURE_SPEED_RANGE[1])
+    gesture_repeat: bool = option(True, "repeat an exercise activity's gesture (at the current speed) for "
+                                  "as long as the activity lasts, as the robot leads the participant (the "
+                                  "gestures qt_controller ships; another is played once)")
     # --- periodic hooks ------------------------------------------------------------------------
     behaviour_period: float = option(20.0, "time between random behaviours", unit="s", gt=0)
     rule_period: float = option(30.0, "time between rule updates (a rule update wins over a behaviour "

@@ -224,6 +224,10 @@ def parse_routine(raw: Any, variables: Mapping[str, float] | None = None, source
             awhere = f"{where}, activity {a['name']!r}"
             if "duration" not in a:
                 raise RoutineError(f"{awhere}: missing 'duration'")
+            empty = [k for k, v in a.items() if v is None]
+            if empty:  # e.g. {label: step-up, reach and pull}: YAML reads "reach and pull" as a key
+                raise RoutineError(f"{awhere}: {', '.join(map(repr, empty))} has no value; a comma inside "
+                                   "an unquoted value in {...} starts a new key: quote the value")
             mets = a.get("mets")
             if mets is not None and (not _is_number(mets) or mets < 1):
                 raise RoutineError(f"{awhere}: mets must be a number >= 1 (the cost in METs), got {mets!r}")

@@ -99,6 +99,7 @@ class ClockAndWatcher(BackgroundNode):
         self.view = view
         self.listeners = listeners
         self.lock = threading.Lock()
+        self.sim_now = math.nan  # the last /clock published: what sim time it is when a sample arrives
         # Deep: at high --speed hundreds of clock messages a second must reach the recorder too.
         self.clock_pub = self.node.create_publisher(Clock, "/clock", CLOCK_DEPTH)
         self.control_pub = self.node.create_publisher(String, topics.COACH_CONTROL, command_qos())
@@ -108,7 +109,7 @@ class ClockAndWatcher(BackgroundNode):
             frame = msg_to_frame(msg)
             with self.lock:
                 for t, bpm in zip(frame.timestamps, frame.values[:, -1], strict=True):
-                    view.on_hr(float(bpm), float(t))
+                    view.on_hr(float(bpm), float(t), self.sim_now)
                 if strap:
                     view.strap_samples += frame.num_samples
 
@@ -156,6 +157,7 @@ class ClockAndWatcher(BackgroundNode):
 
     def publish_clock(self, t: float) -> None:
         self.clock_pub.publish(clock_message(t))
+        self.sim_now = t
 
     def send_start(self) -> None:
         self.control_pub.publish(self._string_cls(data="start"))

@@ -45,9 +45,13 @@ class SessionView:
     state: dict = field(default_factory=dict)
     hr: float = math.nan
     hr_seen: int = 0  # on the coach's HR topic, since launch
-    #: Sample times (sim time) of every HR value on the coach's HR topic. Counted against the session's
-    #: start and end only when asked: under load a value can arrive after the event that bounds it.
+    #: Source times of every HR value on the coach's HR topic (the strap's clock: LSL time), counted
+    #: against the session's start and end (sim time) only when asked, because under load a value can
+    #: arrive after the event that bounds it.
     hr_times: list[float] = field(default_factory=list, repr=False)
+    #: Source clock minus sim time, from the fastest-delivered value: a value never arrives before it
+    #: was sampled, so ``source_t - arrival`` is at most the offset and the largest is the best estimate.
+    hr_clock_offset: float = -math.inf
     strap_samples: int = 0  # on the strap's HR topic: proves the LSL -> ROS 2 path at start-up
     model_hr: float = math.nan
     zone: tuple[float, float] | None = None
@@ -122,17 +126,20 @@ class SessionView:
 
     @property
     def hr_samples(self) -> int:
-        """HR values on the coach's input whose sample time lies in the session (start <= t < end)."""
-        if self.started_at is None:
+        """HR values on the coach's input sampled in the session (start <= t < end, in sim time)."""
+        if self.started_at is None or not math.isfinite(self.hr_clock_offset):
             return 0
-        end = math.inf if self.ended_at is None else self.ended_at
-        return sum(self.started_at <= t < end for t in self.hr_times)
+        start = self.started_at + self.hr_clock_offset
+        end = math.inf if self.ended_at is None else self.ended_at + self.hr_clock_offset
+        return sum(start <= t < end for t in self.hr_times)
 
-    def on_hr(self, bpm: float, t: float) -> None:
-        """One HR value with its sample time (sim time)."""
+    def on_hr(self, bpm: float, source_t: float, arrival: float) -> None:
+        """One HR value: its source timestamp and the sim time it arrived at (NaN: not known yet)."""
         self.hr = bpm
         self.hr_seen += 1
-        self.hr_times.append(t)
+        self.hr_times.append(source_t)
+        if math.isfinite(arrival):
+            self.hr_clock_offset = max(self.hr_clock_offset, source_t - arrival)
         if self.zone is not None and self.state.get("phase_kind") in EXERCISE_PHASES:
             self.exercise_hr += 1
             self.exercise_in_zone += int(self.zone[0] <= bpm <= self.zone[1])
