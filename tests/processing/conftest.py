@@ -33,3 +33,13 @@ def mitdb() -> Record:
     x = resample_poly(rec.p_signal[:, 0], 13, 36)
     beats = np.array([s for s, sym in zip(ann.sample, ann.symbol, strict=True) if sym in BEAT_SYMBOLS])
     return Record(np.arange(x.shape[0]) / FS, x, beats / 360.0)
+
+
+@pytest.fixture
+def collector(ros_context):
+    """A subscriber node (real rclpy) for the processor's outputs, closed after the test."""
+    from helpers import RosFrameCollector
+
+    c = RosFrameCollector(ros_context)
+    yield c
+    c.close()

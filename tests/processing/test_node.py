@@ -60,13 +60,6 @@ class Outputs:
                 np.concatenate([f.values[:, 0] for f in frames]))
 
 
-@pytest.fixture
-def collector(ros_context):
-    c = RosFrameCollector(ros_context)
-    yield c
-    c.close()
-
-
 def run(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
     return subprocess.run([EXE, *args], capture_output=True, text=True, timeout=timeout, env=dict(os.environ),
                           stdin=subprocess.DEVNULL)

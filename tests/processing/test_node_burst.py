@@ -14,18 +14,11 @@ import numpy as np
 import pytest
 from test_node import Outputs
 
-from helpers import NodeProcess, RosFrameCollector, wait_until
+from helpers import NodeProcess, wait_until
 
 pytestmark = [pytest.mark.integration, pytest.mark.ros]
 FS = 130
 FRAME = 13
-
-
-@pytest.fixture
-def collector(ros_context):
-    c = RosFrameCollector(ros_context)
-    yield c
-    c.close()
 
 
 def burst(ros_context, topic: str, t: np.ndarray, x: np.ndarray, paced_tail: int = 0) -> None:

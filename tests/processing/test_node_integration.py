@@ -15,18 +15,11 @@ import numpy as np
 import pytest
 from test_node import Outputs
 
-from helpers import NodeProcess, RosFrameCollector, wait_until
+from helpers import NodeProcess, wait_until
 from proc_helpers import match_beats
 
 pytestmark = [pytest.mark.integration, pytest.mark.ros]
 FS = 130
-
-
-@pytest.fixture
-def collector(ros_context):
-    c = RosFrameCollector(ros_context)
-    yield c
-    c.close()
 
 
 def test_mitdb_through_receiver_and_processor(mitdb, collector, lsl_name: str, tmp_path: Path) -> None:
