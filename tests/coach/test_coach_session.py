@@ -13,6 +13,7 @@ import pytest
 
 from hri_physio_coach.coach import ExerciseCoach, shipped_gesture_durations
 from hri_physio_coach.config import CoachConfig
+from qt_controller.emotions import EmotionCatalogue
 
 CALIB, WARM, COND, COOL, END = 0.0, 180.0, 480.0, 1080.0, 1380.0
 # (start, activity, gesture, video) of every activity of the thesis routine.
@@ -178,6 +179,8 @@ def test_calibration_shows_encouraging_faces_in_turn(session: Session) -> None:
     faces = session.of("behaviour", kind="encouragement")
     assert [e["t"] for e in faces] == [45.0, 90.0, 135.0]  # every calib_face_period while seated
     assert [e["emotion"] for e in faces] == ["showing_smile", "happy_blinking", "happy"]
+    robot_faces = EmotionCatalogue()  # QT's standard set: the default faces need no extra expression files
+    assert all(robot_faces.resolve(e) for e in CoachConfig().emotion_calibration)
     for e in faces:
         assert (e["t"], f"set emotion {e['emotion']}") in session.commands
 
