@@ -144,6 +144,7 @@ class ExerciseCoach(Listener):
             for p in routine.phases)
         self._tempos = tuple(tempo_from_name(s) for s in self.ladder.suffixes)
         self._buffer_since = 0.0
+        self._pending_rule: tuple[float, Any] | None = None  # (rule time, its deadline timer)
         self._noticed: set[str] = set()
         self._calls: dict[str, Callable[[ActionContext], None]] = {"calibrate": self._call_calibrate}
         hooks = {
@@ -179,6 +180,7 @@ class ExerciseCoach(Listener):
         now = self.clock() if now is None else float(now)
         if self.engine.running:
             self._check_hr_timeout(now)
+            self._check_pending_rule(now)
         self.engine.tick(now)
         if self.engine.running and self._gesture_next is not None and now >= self._gesture_next:
             assert self._gesture is not None  # set with _gesture_next
@@ -191,9 +193,10 @@ class ExerciseCoach(Listener):
               source_t: float | None = None) -> None:
         """One HR sample (bpm) received at ``now`` on the coach's clock; ``source_t`` is its own stamp."""
         now = self.clock() if now is None else float(now)
-        self.monitor.add(now, float(hr), flagged)
+        self.monitor.add(now, float(hr), flagged, source_t)
         if self.engine.running:
             self._check_hr_timeout(now)
+            self._check_pending_rule(now)
 
     def on_reply(self, reply: Mapping[str, Any]) -> None:
         """A reply of qt_controller; failures are logged as events and the session goes on."""
@@ -386,7 +389,7 @@ class ExerciseCoach(Listener):
             self._calibrate(t)
 
     def on_activity_start(self, phase: Phase, activity: Activity, t: float) -> None:
-        self.monitor.clear()
+        self.monitor.clear(before=t)
         self._buffer_since = t
         running = self.choice.slot_started(phase, activity, self.adapter.level)
         if running is not None:
@@ -471,10 +474,39 @@ class ExerciseCoach(Listener):
             self.say(text, "behaviour: heart-rate report")
 
     def _rule_update(self, t: float) -> None:
-        stats = self.monitor.take()
+        """Decide now, or once the heart rate taken before ``t`` has arrived (``hr_wait``).
+
+        The wait ends at the activity's end at the latest, so a decision is always about the
+        activity that ran in its window (hooks run before the transition due at the same instant).
+        """
+        deadline = min(t + self.cfg.hr_wait, self.engine.activity_end)
+        if deadline <= t or self.monitor.window_complete(t):
+            self._decide(t)
+            return
+        timer = self.engine.schedule(deadline, lambda: self._decide_pending(), "rule update: heart rate late")
+        self._pending_rule = (t, timer)
+
+    def _check_pending_rule(self, now: float) -> None:
+        """The samples a waiting rule update needs have arrived (or stopped): decide at ``now``."""
+        if self._pending_rule is None or not self.monitor.window_complete(self._pending_rule[0]):
+            return
+        t, timer = self._pending_rule
+        self.engine.cancel(timer)
+        at = min(max(now, self.engine.now), timer.time)
+        self._pending_rule = (t, self.engine.schedule(at, lambda: self._decide_pending(), "rule update"))
+
+    def _decide_pending(self) -> None:
+        assert self._pending_rule is not None  # scheduled with it
+        t, _ = self._pending_rule
+        self._pending_rule = None
+        self._decide(t)
+
+    def _decide(self, t: float) -> None:
+        stats = self.monitor.take(self._buffer_since, t)
         phase = self.engine.phase
         activity = self.engine.activity
-        inputs = {**stats.as_dict(), "phase": phase.name if phase else None,
+        inputs = {**stats.as_dict(), "window": [self._buffer_since, t],
+                  "waited": round(self.engine.now - t, 6), "phase": phase.name if phase else None,
                   "phase_kind": phase.kind if phase else None,
                   "activity": activity.name if activity else None,
                   "zone": [self.zone.low, self.zone.high] if self.zone else None,
@@ -492,7 +524,7 @@ class ExerciseCoach(Listener):
             ))
         self._buffer_since = t
         self.decisions.append(decision)
-        self._emit({"event": RULE_UPDATE, "inputs": inputs, "decision": decision.as_dict(),
+        self._emit({"t": t, "event": RULE_UPDATE, "inputs": inputs, "decision": decision.as_dict(),
                     "ladder": self.ladder.state()})
         switched = self._apply_level(decision)
         if not switched:

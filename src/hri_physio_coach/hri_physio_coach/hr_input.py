@@ -1,13 +1,18 @@
-"""Heart-rate input of the coach: validity, the rule-update buffer, recent values, timeouts.
+"""Heart-rate input of the coach: validity, the rule-update window, recent values, timeouts.
 
-Samples are kept with their *receipt* time on the coach's clock (the clock the scenario runs
-on) next to their source time: windows such as "the last 30 s" and the data timeout are
-measured on the coach's clock, because source timestamps come from another clock (LSL).
+Two clocks meet here. Windows such as "the last 30 s" and the data timeout are measured on the
+coach's clock (the clock the scenario runs on). A rule update's window holds the samples *taken*
+in it: each sample's source stamp (another clock, e.g. LSL) is mapped onto the coach's clock with
+the offset of the fastest-delivered sample (a sample never arrives before it was taken, so
+``source - receipt`` is at most the offset and its largest value is the best estimate). So a
+window has the same samples however late the transport delivers them, and
+:meth:`HeartRateMonitor.window_complete` tells a rule update whether the last of them has come.
 """
 
 from __future__ import annotations
 
 import math
+import statistics
 from collections import deque
 from dataclasses import dataclass
 
@@ -36,6 +41,15 @@ class BufferStats:
                 "n_flagged": self.n_flagged}
 
 
+#: Kinds of samples in the rule-update window.
+VALID, INVALID, FLAGGED = "valid", "invalid", "flagged"
+#: A source clock that falls back by more than this (s) against the arrivals was restarted (a strap
+#: reconnected, a replay looped): the mapping onto the coach's clock starts again.
+CLOCK_RESET = 5.0
+#: Sample intervals remembered to know when the next sample is due.
+INTERVALS_KEPT = 9
+
+
 class HeartRateMonitor:
     """Collects HR samples; tells a rule update whether the signal can be trusted."""
 
@@ -47,11 +61,12 @@ class HeartRateMonitor:
         self.min_valid = min_valid
         self.max_bad_fraction = max_bad_fraction
         self.recent_window = recent_window
-        self._valid: deque[float] = deque(maxlen=maxlen)
-        self._invalid = 0
-        self._flagged = 0
+        self._window: deque[tuple[float, str, float]] = deque(maxlen=maxlen)  # (taken, kind, bpm)
         self._recent: deque[tuple[float, float]] = deque()
         self._calibration: list[float] | None = None
+        self.clock_offset: float | None = None  # source clock minus coach clock (fastest sample)
+        self.newest_sample: float | None = None  # when the newest sample was taken (coach clock)
+        self._intervals: deque[float] = deque(maxlen=INTERVALS_KEPT)
         self.last_receipt: float | None = None
         self.last_hr: float | None = None
         self.lost = False
@@ -60,34 +75,78 @@ class HeartRateMonitor:
     def is_valid(self, hr: float) -> bool:
         return math.isfinite(hr) and self.valid_min <= hr <= self.valid_max
 
-    def add(self, receipt_time: float, hr: float, flagged: bool = False) -> bool:
-        """Add one sample; True when it is valid (counted in the mean)."""
+    def sample_time(self, receipt_time: float, source_t: float | None) -> float:
+        """When a sample received at ``receipt_time`` was taken, on the coach's clock."""
+        if source_t is None or not math.isfinite(source_t):
+            return receipt_time
+        lead = source_t - receipt_time
+        if self.clock_offset is None or lead > self.clock_offset or lead < self.clock_offset - CLOCK_RESET:
+            if self.clock_offset is not None and lead < self.clock_offset - CLOCK_RESET:
+                self.newest_sample = None  # another timeline: intervals and order start again
+                self._intervals.clear()
+            self.clock_offset = lead
+        return source_t - self.clock_offset
+
+    def add(self, receipt_time: float, hr: float, flagged: bool = False,
+            source_t: float | None = None) -> bool:
+        """Add one sample (``source_t``: its own stamp); True when it is valid (counted in the mean)."""
         self.last_receipt = receipt_time
+        taken = self.sample_time(receipt_time, source_t)
+        if self.newest_sample is not None and taken > self.newest_sample:
+            self._intervals.append(taken - self.newest_sample)
+        if self.newest_sample is None or taken > self.newest_sample:
+            self.newest_sample = taken
         if flagged:
-            self._flagged += 1
+            self._window.append((taken, FLAGGED, hr))
             return False
         if not self.is_valid(hr):
-            self._invalid += 1
+            self._window.append((taken, INVALID, hr))
             return False
-        self._valid.append(hr)
+        self._window.append((taken, VALID, hr))
         self.last_hr = hr
         self._recent.append((receipt_time, hr))
         if self._calibration is not None:
             self._calibration.append(hr)
         return True
 
-    def stats(self) -> BufferStats:
-        mean = sum(self._valid) / len(self._valid) if self._valid else None
-        return BufferStats(mean, len(self._valid), self._invalid, self._flagged)
+    @property
+    def sample_interval(self) -> float | None:
+        """The source's usual time between samples (median of the last few), None before two."""
+        return statistics.median(self._intervals) if self._intervals else None
 
-    def clear(self) -> None:
-        self._valid.clear()
-        self._invalid = self._flagged = 0
+    def window_complete(self, end: float) -> bool:
+        """Whether every sample taken before ``end`` has arrived (as far as the source's rhythm tells).
 
-    def take(self) -> BufferStats:
-        """The buffer's statistics, then an empty buffer (every rule update clears it)."""
-        stats = self.stats()
-        self.clear()
+        True when a sample taken at or after ``end`` arrived, when the next one is due at or after
+        ``end``, or when there is nothing to wait for (no samples yet, data lost).
+        """
+        if self.lost or self.newest_sample is None:
+            return True
+        interval = self.sample_interval
+        return self.newest_sample >= end or (interval is not None and self.newest_sample + interval >= end)
+
+    def stats(self, start: float = -math.inf, end: float = math.inf) -> BufferStats:
+        """The window's samples taken in ``[start, end)``."""
+        counts = {VALID: 0, INVALID: 0, FLAGGED: 0}
+        total = 0.0
+        for taken, kind, hr in self._window:
+            if start <= taken < end:
+                counts[kind] += 1
+                if kind == VALID:
+                    total += hr
+        n = counts[VALID]
+        return BufferStats(total / n if n else None, n, counts[INVALID], counts[FLAGGED])
+
+    def clear(self, before: float = math.inf) -> None:
+        """Forget the samples taken before ``before`` (default: all)."""
+        kept = [entry for entry in self._window if entry[0] >= before]
+        self._window.clear()
+        self._window.extend(kept)
+
+    def take(self, start: float = -math.inf, end: float = math.inf) -> BufferStats:
+        """The statistics of the samples taken in ``[start, end)``; every sample before ``end`` is dropped."""
+        stats = self.stats(start, end)
+        self.clear(end)
         return stats
 
     def gate(self, stats: BufferStats, now: float) -> Gate | None:
