@@ -17,6 +17,8 @@ coach's ``session_start`` and then runs this same :func:`~hri_physio_coach.parti
 
 from __future__ import annotations
 
+import heapq
+import itertools
 from collections import deque
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -30,6 +32,7 @@ from hri_physio_coach.participant.perception import RobotObserver
 from hri_physio_coach.participant.physiology import ParticipantParams
 from hri_physio_coach.participant.stream import session_model
 from hri_physio_coach.routine import Routine
+from qt_controller.commands import ParseError, SetAudio, parse_command
 
 #: Heart-rate samples travel strap -> LSL -> receiver -> coach; this is their delay (s) here.
 DEFAULT_HR_LATENCY = 0.1
@@ -46,6 +49,16 @@ class SessionSpec:
     coach_seed: int  # the coach's draws (fuzzy rule, behaviours)
     variant: str = "main"  # sensitivity variant the params come from
     hr_latency: float = DEFAULT_HR_LATENCY
+    #: Transport stalls, ``(start, end)`` s of session time: the samples taken in one arrive together at
+    #: its end (plus ``hr_latency``), as from a loaded machine.
+    hr_stalls: tuple[tuple[float, float], ...] = ()
+    #: Robot commands reach the participant this long (s) after the coach sent them.
+    command_latency: float = 0.0
+    #: A new music tempo is heard this much (s) later still (the audio streamer's cross-fade).
+    tempo_latency: float = 0.0
+    #: The participant's seeded model starts this long (s) after the coach's ``session_start`` (a closed
+    #: loop hands over on the strap's next fitting second: docs/PARTICIPANT_MODEL.md).
+    model_start: float = 0.0
     coach_options: tuple[tuple[str, Any], ...] = ()  # extra coach options, e.g. (("speed_idx", 2),)
 
 
@@ -87,22 +100,43 @@ def coach_config(spec: SessionSpec, base: CoachConfig | None = None) -> CoachCon
     return CoachConfig.from_mapping(values, f"session {spec.policy}/{spec.participant}")
 
 
+def _is_audio(line: str) -> bool:
+    try:
+        return isinstance(parse_command(line), SetAudio)
+    except ParseError:
+        return False
+
+
 def simulate_session(spec: SessionSpec, base: CoachConfig | None = None) -> SessionRun:
     """Run one whole session; returns its events, decisions and per-second traces."""
     cfg = coach_config(spec, base)
     routine = session_routine(cfg)
-    sim = session_model(spec.params, spec.participant_seed, 0.0, ecg=False)
+    sim = session_model(spec.params, spec.participant_seed, spec.model_start, ecg=False)
     observer = RobotObserver()
     clock = [0.0]
+    commands: list[tuple[float, int, str]] = []  # heap: (when the participant sees it, order, line)
+    sent = itertools.count()
 
-    def send(line: str) -> None:
+    def see(line: str) -> None:
         if observer.observe(line):
             sim.set_activity(observer.activity)
+
+    def send(line: str) -> None:
+        delay = spec.command_latency + (spec.tempo_latency if _is_audio(line) else 0.0)
+        if delay > 0:
+            heapq.heappush(commands, (clock[0] + delay, next(sent), line))
+        else:
+            see(line)
 
     events: list[dict[str, Any]] = []
     coach = ExerciseCoach(cfg, lambda: clock[0], send, events.append, routine=routine)
     coach.start(0.0)
     latency = spec.hr_latency
+
+    def delivered(t_hr: float) -> float:
+        stalled = [end for start, end in spec.hr_stalls if start <= t_hr < end]
+        return max([t_hr, *stalled]) + latency
+
     arrivals: deque[tuple[float, float, float, float]] = deque()  # (arrival, source time, bpm, model bpm)
     ts: list[float] = []
     hrs: list[float] = []
@@ -110,14 +144,17 @@ def simulate_session(spec: SessionSpec, base: CoachConfig | None = None) -> Sess
     ladder: list[int] = []
     mets: list[float] = []
     acts: list[str] = []
-    next_sample = 1.0  # the strap reports HR every whole second of model time
+    next_sample = spec.model_start + 1.0  # the strap reports HR every whole second of model time
     while not coach.finished:
-        due = coach.engine.next_due()
-        now = next_sample + latency if due is None else min(due, next_sample + latency)
+        wake = (coach.engine.next_due(), next_sample + latency, arrivals[0][0] if arrivals else None,
+                commands[0][0] if commands else None)
+        now = min(t for t in wake if t is not None)
         for t_hr, bpm, true_bpm in sim.advance_hr(now):
-            arrivals.append((t_hr + latency, t_hr, bpm, true_bpm))
+            arrivals.append((delivered(t_hr), t_hr, bpm, true_bpm))
             next_sample = t_hr + 1.0
         clock[0] = now
+        while commands and commands[0][0] <= now + 1e-9:
+            see(heapq.heappop(commands)[2])
         while arrivals and arrivals[0][0] <= now + 1e-9:
             arrival, source, bpm, true_bpm = arrivals.popleft()
             coach.on_hr(bpm, now=arrival, source_t=source)
