@@ -23,7 +23,16 @@ from typing import Any
 from hri_physio_coach import gates
 from hri_physio_coach.activity_choice import ActivityChoice
 from hri_physio_coach.config import CoachConfig
-from hri_physio_coach.engine import FINISHED, STOPPED, ActionContext, Event, Hook, Listener, ScenarioEngine
+from hri_physio_coach.engine import (
+    FINISHED,
+    STOPPED,
+    ActionContext,
+    Event,
+    Hook,
+    Listener,
+    ScenarioEngine,
+    Timer,
+)
 from hri_physio_coach.hr_input import HeartRateMonitor
 from hri_physio_coach.ladder import SpeedLadder
 from hri_physio_coach.media_names import tempo_from_name
@@ -144,7 +153,7 @@ class ExerciseCoach(Listener):
             for p in routine.phases)
         self._tempos = tuple(tempo_from_name(s) for s in self.ladder.suffixes)
         self._buffer_since = 0.0
-        self._pending_rule: tuple[float, Any] | None = None  # (rule time, its deadline timer)
+        self._pending_rule: tuple[float, Timer] | None = None  # (rule time, its deadline timer)
         self._noticed: set[str] = set()
         self._calls: dict[str, Callable[[ActionContext], None]] = {"calibrate": self._call_calibrate}
         hooks = {
@@ -483,7 +492,7 @@ class ExerciseCoach(Listener):
         if deadline <= t or self.monitor.window_complete(t):
             self._decide(t)
             return
-        timer = self.engine.schedule(deadline, lambda: self._decide_pending(), "rule update: heart rate late")
+        timer = self.engine.schedule(deadline, self._decide_pending, "rule update: heart rate late")
         self._pending_rule = (t, timer)
 
     def _check_pending_rule(self, now: float) -> None:
@@ -493,7 +502,7 @@ class ExerciseCoach(Listener):
         t, timer = self._pending_rule
         self.engine.cancel(timer)
         at = min(max(now, self.engine.now), timer.time)
-        self._pending_rule = (t, self.engine.schedule(at, lambda: self._decide_pending(), "rule update"))
+        self._pending_rule = (t, self.engine.schedule(at, self._decide_pending, "rule update"))
 
     def _decide_pending(self) -> None:
         assert self._pending_rule is not None  # scheduled with it

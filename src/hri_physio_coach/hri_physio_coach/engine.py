@@ -74,6 +74,10 @@ class _Timer:
     cancelled: bool = field(compare=False, default=False)
 
 
+#: What :meth:`ScenarioEngine.schedule` returns: keep it to cancel the timer.
+Timer = _Timer
+
+
 class Listener:
     """Override what you need: called as the engine enters phases and activities and ends."""
 

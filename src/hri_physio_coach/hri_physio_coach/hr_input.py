@@ -80,10 +80,11 @@ class HeartRateMonitor:
         if source_t is None or not math.isfinite(source_t):
             return receipt_time
         lead = source_t - receipt_time
-        if self.clock_offset is None or lead > self.clock_offset or lead < self.clock_offset - CLOCK_RESET:
-            if self.clock_offset is not None and lead < self.clock_offset - CLOCK_RESET:
-                self.newest_sample = None  # another timeline: intervals and order start again
-                self._intervals.clear()
+        restarted = self.clock_offset is not None and lead < self.clock_offset - CLOCK_RESET
+        if restarted:
+            self.newest_sample = None  # another timeline: intervals and order start again
+            self._intervals.clear()
+        if self.clock_offset is None or restarted or lead > self.clock_offset:
             self.clock_offset = lead
         return source_t - self.clock_offset
 
@@ -92,9 +93,9 @@ class HeartRateMonitor:
         """Add one sample (``source_t``: its own stamp); True when it is valid (counted in the mean)."""
         self.last_receipt = receipt_time
         taken = self.sample_time(receipt_time, source_t)
-        if self.newest_sample is not None and taken > self.newest_sample:
-            self._intervals.append(taken - self.newest_sample)
         if self.newest_sample is None or taken > self.newest_sample:
+            if self.newest_sample is not None:
+                self._intervals.append(taken - self.newest_sample)
             self.newest_sample = taken
         if flagged:
             self._window.append((taken, FLAGGED, hr))
