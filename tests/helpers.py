@@ -26,6 +26,27 @@ def wait_until(predicate: Callable[[], bool], timeout: float, what: str | Callab
         time.sleep(period)
 
 
+def publish_burst(publisher, messages, timeout: float = 60.0) -> None:
+    """Publish every message in order as fast as the reliable KEEP_ALL ``publisher`` takes them.
+
+    Fast DDS keeps at most 5000 unacknowledged samples per writer; a write that finds them all
+    still unacknowledged waits 100 ms and then fails ("cannot publish data"). A burst sender
+    that must lose nothing sends that same message again once the subscriber has caught up.
+    """
+    from rclpy.impl.implementation_singleton import rclpy_implementation
+
+    for msg in messages:
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                publisher.publish(msg)
+                break
+            except rclpy_implementation.RCLError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.01)
+
+
 class NodeProcess:
     """A console-script node in a subprocess, output captured to a file."""
 

@@ -19,7 +19,7 @@ from typing import Any
 
 import pytest
 
-from helpers import NodeProcess, wait_until
+from helpers import NodeProcess, publish_burst, wait_until
 from hri_physio_bridge import topics
 from hri_physio_bridge.ros_tools import ExecutorThread, clock_message
 
@@ -219,8 +219,7 @@ def test_every_control_line_of_a_burst_is_handled_and_counted(probe: Probe) -> N
     with NodeProcess("qt_physio_coach", *args) as coach:
         coach.wait_for_output("waiting for 'start'")
         wait_until(lambda: probe.control.get_subscription_count() > 0, 20, "the coach to subscribe")
-        for i in range(burst):
-            probe.control.publish(String(data=f"jump {i}"))
+        publish_burst(probe.control, (String(data=f"jump {i}") for i in range(burst)))
         probe.control.publish(String(data="start"))  # the line after the burst is not lost either
 
         def counted() -> dict[str, Any]:
