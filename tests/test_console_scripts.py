@@ -2,13 +2,13 @@
 
 For each node: a wrong-typed parameter (``--ros-args -p <numeric option>:=abc``), a missing params
 file, a broken params file and an unknown flag. For the tools and launchers (no ROS parameters):
-an unknown flag and a wrong-typed option. The list of scripts comes from the packages' setup.py
+an unknown flag and a wrong-typed option. The list of scripts comes from the packages' setup.cfg
 files, so a new script without an entry here fails the test.
 """
 
 from __future__ import annotations
 
-import re
+import configparser
 import subprocess
 import sys
 from pathlib import Path
@@ -49,8 +49,11 @@ TOOLS = {
 
 def _console_scripts() -> set[str]:
     names = set()
-    for setup in ROOT.glob("src/*/setup.py"):
-        names.update(re.findall(r'"([a-z_]+) = [a-z_.]+:main"', setup.read_text()))
+    for setup in ROOT.glob("src/*/setup.cfg"):
+        config = configparser.ConfigParser()
+        config.read(setup)
+        lines = config.get("options.entry_points", "console_scripts", fallback="").splitlines()
+        names.update(line.split("=")[0].strip() for line in lines if line.strip())
     return names
 
 

@@ -1,28 +1,3 @@
-from glob import glob
+from setuptools import setup
 
-from setuptools import find_packages, setup
-
-package_name = "audio_video_streamers"
-
-setup(
-    name=package_name,
-    version="0.1.0",
-    packages=find_packages(exclude=["test"]),
-    data_files=[
-        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
-        ("share/" + package_name, ["package.xml", "README.md"]),
-        ("share/" + package_name + "/config", glob("config/*.yaml")),
-    ],
-    install_requires=["setuptools"],
-    zip_safe=True,
-    maintainer="HRI Physio maintainers",
-    maintainer_email="maintainers@hri-physio.invalid",
-    description="Audio and video streamers: the music and reference videos the coach adapts",
-    license="BSD-3-Clause",
-    entry_points={
-        "console_scripts": [
-            "audio_streamer = audio_video_streamers.nodes.audio_streamer:main",
-            "video_streamer = audio_video_streamers.nodes.video_streamer:main",
-        ],
-    },
-)
+setup()  # everything is declared in setup.cfg

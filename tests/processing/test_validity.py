@@ -226,3 +226,12 @@ def test_shipped_config_file_holds_the_defaults() -> None:
     values = yaml.safe_load(path.read_text())
     assert set(values) == set(ProcessorConfig.model_fields)
     assert ProcessorConfig.from_mapping(values) == ProcessorConfig()
+
+
+def test_the_feature_settings_come_from_the_options() -> None:
+    cfg = ProcessorConfig().replace(mode="ppg", sampling_rate=55.0, min_beats=7, hrv_window_seconds=0.0)
+    settings = cfg.features
+    assert (settings.mode, settings.sampling_rate, settings.min_beats) == ("ppg", 55.0, 7)
+    assert settings.flatline_seconds == cfg.mode_default("flatline_seconds")
+    assert settings.frequency_domain  # no long HRV window: LF/HF on the window itself
+    assert not ProcessorConfig().replace(hrv_window_seconds=300.0).features.frequency_domain

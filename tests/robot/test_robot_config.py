@@ -55,3 +55,14 @@ def test_lists_from_text_and_yaml() -> None:
     emotions = QtControllerConfig.from_mapping({"extra_emotions": "QT/a, QT/b"}).extra_emotions
     assert emotions == ["QT/a", "QT/b"]
     assert MockQtRobotConfig.from_mapping({"gesture_dirs": ["x", "y"]}).gesture_dirs == ["x", "y"]
+
+
+def test_the_mock_takes_its_settings_from_the_options_of_the_same_names() -> None:
+    from qt_controller.mock_robot import MockConfig
+
+    options = MockQtRobotConfig().replace(emotion_seconds=1.5, default_volume=20,
+                                          gesture_busy_policy="refuse")
+    mock = options.settings(MockConfig)
+    assert (mock.emotion_seconds, mock.default_volume, mock.gesture_busy_policy) == (1.5, 20, "refuse")
+    assert mock.default_speech_pitch == MockConfig().default_speech_pitch  # no such option: its default
+    assert options.settings(MockConfig, default_volume=70).default_volume == 70  # an override wins

@@ -38,6 +38,7 @@ class RequestLedger:
         self._lock = threading.Lock()
         self._counts = RequestCounts()
         self._pending: list[str] = []
+        self._last_key: tuple[Any, ...] | None = None  # what the last status showed (see changed)
 
     def received(self, text: str) -> None:
         with self._lock:
@@ -53,6 +54,22 @@ class RequestLedger:
     def snapshot(self) -> tuple[RequestCounts, tuple[str, ...]]:
         with self._lock:
             return self._counts, tuple(self._pending)
+
+    def status(self, t: float, state: State, error: tuple[str, str] | None, extra: dict[str, Any],
+               **fields: Any) -> MediaStatus:
+        """A status with these counts; with ``error`` (request, message) it reports that failure."""
+        counts, pending = self.snapshot()
+        return MediaStatus(t=t, state=State.ERROR if error else state, requests=counts, pending=pending,
+                           error=error[1] if error else None, request=error[0] if error else None,
+                           extra=extra, **fields)
+
+    def changed(self, key: tuple[Any, ...]) -> bool:
+        """True when ``key`` (what a status shows) together with the counts differs from the last call's."""
+        key = (*key, self.snapshot())
+        if key == self._last_key:
+            return False
+        self._last_key = key
+        return True
 
 
 @dataclass(frozen=True)

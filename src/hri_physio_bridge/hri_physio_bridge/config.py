@@ -16,15 +16,18 @@ Nothing here imports rclpy: a configuration can be checked before any node start
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import types
 import typing
 from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any, ClassVar, Literal, NoReturn, Self, get_args, get_origin
+from typing import Any, ClassVar, Literal, NoReturn, Self, TypeVar, get_args, get_origin
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 from pydantic.fields import FieldInfo
+
+T = TypeVar("T")
 
 
 class ConfigError(ValueError):
@@ -197,6 +200,15 @@ class NodeConfig(BaseModel):
 
     def as_dict(self) -> dict[str, Any]:
         return self.model_dump()
+
+    def settings(self, cls: type[T], **overrides: Any) -> T:
+        """A logic module's settings dataclass ``cls`` from the options of the same names, plus ``overrides``.
+
+        Options the dataclass does not have are left out; its fields without an option keep their defaults.
+        """
+        names = {f.name for f in dataclasses.fields(cls)} - overrides.keys()
+        values = {name: getattr(self, name) for name in names if name in type(self).model_fields}
+        return cls(**values, **overrides)
 
     def to_yaml(self, node_name: str | None = None) -> str:
         """The resolved options as YAML (a ROS params file when ``node_name`` is given)."""

@@ -165,18 +165,10 @@ class ProcessorConfig(NodeConfig):
 
     @property
     def features(self) -> FeatureSettings:
-        return FeatureSettings(
-            mode=self.mode,
-            sampling_rate=self.sampling_rate,
-            quality_method=self.quality_method,
-            min_quality=self.min_quality,
-            min_beats=self.min_beats,
-            min_hr=self.min_hr,
-            max_hr=self.max_hr,
+        return self.settings(
+            FeatureSettings,
             flatline_seconds=self.mode_default("flatline_seconds"),
             saturation_fraction=self.mode_default("saturation_fraction"),
-            rate_tolerance=self.rate_tolerance,
-            correct_artifacts=self.correct_artifacts,
             frequency_domain=self.hrv_window_seconds == 0,
         )
 

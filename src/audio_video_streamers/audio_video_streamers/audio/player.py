@@ -26,7 +26,7 @@ from audio_video_streamers.audio.sinks import AudioSink
 from audio_video_streamers.audio.track import Track
 from audio_video_streamers.pacing import Clock
 from audio_video_streamers.requests import RequestError, parse_audio_request, unexpected_failure
-from audio_video_streamers.status import MediaStatus, RequestLedger, State
+from audio_video_streamers.status import MediaStatus, RequestLedger
 
 StatusCallback = Callable[[MediaStatus], None]
 
@@ -52,7 +52,6 @@ class AudioPlayer:
         self.ledger = RequestLedger()
         self._stop = threading.Event()
         self._loader: threading.Thread | None = None
-        self._last_key: tuple | None = None
 
     # --- requests (any thread) ---------------------------------------------------------------
     def request(self, text: str) -> None:
@@ -159,12 +158,10 @@ class AudioPlayer:
     def _emit_if_changed(self) -> None:
         with self._lock:
             current = self.mixer.current
-            key = (self.mixer.state, current.track.source if current else None,
-                   tuple(self.mixer.fading_out()), self.ledger.snapshot())
-            if key == self._last_key:
-                return
-            self._last_key = key
-        self.on_status(self.status())
+            changed = self.ledger.changed((self.mixer.state, current.track.source if current else None,
+                                           tuple(self.mixer.fading_out())))
+        if changed:
+            self.on_status(self.status())
 
     # --- status ------------------------------------------------------------------------------
     def status(self, error: tuple[str, str] | None = None) -> MediaStatus:
@@ -187,12 +184,7 @@ class AudioPlayer:
                               position=round((voice.position % track.frames) / track.rate, 3),
                               elapsed=round(voice.position / track.rate, 3),
                               loops=voice.position // track.frames, duration=round(track.duration, 3))
-            counts, pending = self.ledger.snapshot()
-            return MediaStatus(
-                t=self.clock(), state=State.ERROR if error else state, requests=counts,
-                pending=pending, error=error[1] if error else None,
-                request=error[0] if error else None, extra=extra, **fields,
-            )
+            return self.ledger.status(self.clock(), state, error, extra, **fields)
 
     def close(self) -> None:
         self._stop.set()

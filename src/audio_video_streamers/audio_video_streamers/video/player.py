@@ -63,7 +63,6 @@ class VideoPlayer:
         self._last_now: float | None = None
         self._next_preview: float | None = None
         self.previews = 0
-        self._last_key: tuple | None = None
 
     # --- inputs (any thread) -----------------------------------------------------------------
     def request(self, text: str) -> None:
@@ -171,12 +170,10 @@ class VideoPlayer:
     def _emit_if_changed(self) -> None:
         with self._lock:
             info = self.source.status(self._elapsed) if self.source is not None else {}
-            key = (self.source.request if self.source else None, info.get("loops"), info.get("tempo"),
-                   self.ledger.snapshot())
-            if key == self._last_key:
-                return
-            self._last_key = key
-        self.on_status(self.status())
+            changed = self.ledger.changed((self.source.request if self.source else None, info.get("loops"),
+                                           info.get("tempo")))
+        if changed:
+            self.on_status(self.status())
 
     # --- status ------------------------------------------------------------------------------
     def status(self, error: tuple[str, str] | None = None) -> MediaStatus:
@@ -191,11 +188,8 @@ class VideoPlayer:
                               position=round(info.pop("position"), 3), elapsed=round(info.pop("elapsed"), 3),
                               loops=info.pop("loops", 0), duration=info.pop("duration", None))
                 extra.update(info, fps=source.fps)
-            state = State.ERROR if error else (State.PLAYING if source is not None else State.STOPPED)
-            counts, pending = self.ledger.snapshot()
-            return MediaStatus(t=self.clock(), state=state, requests=counts, pending=pending,
-                               error=error[1] if error else None, request=error[0] if error else None,
-                               extra=extra, **fields)
+            state = State.PLAYING if source is not None else State.STOPPED
+            return self.ledger.status(self.clock(), state, error, extra, **fields)
 
     def close(self) -> None:
         with self._lock:

@@ -102,13 +102,17 @@ class ChunkCheck:
     unreadable_messages: int
 
 
-def check_chunks(path: Path) -> ChunkCheck:
-    """Every chunk of the complete file ``path`` whose contents do not match its CRC, in file order."""
+def open_file(path: Path) -> BinaryIO:
+    """``path`` opened for reading; BagError naming the file and why it cannot be opened."""
     try:
-        fh = path.open("rb")
+        return path.open("rb")
     except OSError as exc:
         raise BagError(f"cannot open {path}: {exc.strerror}") from None
-    with fh:
+
+
+def check_chunks(path: Path) -> ChunkCheck:
+    """Every chunk of the complete file ``path`` whose contents do not match its CRC, in file order."""
+    with open_file(path) as fh:
         try:
             summary = SeekingReader(fh).get_summary()
         except Exception as exc:

@@ -19,7 +19,7 @@ from mcap.reader import SeekingReader
 from mcap.records import Channel, Schema
 
 from hri_physio_bridge.bag.errors import BagError
-from hri_physio_bridge.bag.integrity import DamagedChunk, check_chunks
+from hri_physio_bridge.bag.integrity import DamagedChunk, check_chunks, open_file
 from hri_physio_bridge.bag.metadata import LOST_KEY, METADATA_FILE, TopicInfo, load_metadata
 from hri_physio_bridge.bag.recovery import McapScanner, topic_info_from_channel
 
@@ -48,11 +48,7 @@ class _File:
 
 def _summary(path: Path) -> _File:
     """Read a file's summary; a missing/unreadable summary marks the file incomplete."""
-    try:
-        fh = path.open("rb")
-    except OSError as exc:
-        raise BagError(f"cannot open {path}: {exc.strerror}") from None
-    with fh:
+    with open_file(path) as fh:
         try:
             reader = SeekingReader(fh)
         except (McapError, ValueError, EOFError) as exc:

@@ -129,12 +129,8 @@ class Streamer(abc.ABC):
         return f"{self.scheme}:{self.address}"
 
     @abc.abstractmethod
-    def open_input(
-        self,
-        expected: StreamSpec | None = None,
-        timeout: float = 10.0,
-        stop: threading.Event | None = None,
-    ) -> StreamSpec:
+    def open_input(self, expected: StreamSpec | None = None, timeout: float = 10.0,
+                   stop: threading.Event | None = None) -> StreamSpec:
         """Connect to the source; return what it is. Raise StreamNotFoundError/StreamMismatchError.
 
         A transport that waits for its source gives up promptly with OpenCancelled once ``stop``

@@ -150,12 +150,8 @@ class CsvStreamer(Streamer):
         self.exhausted = False
 
     # -- input ---------------------------------------------------------------
-    def open_input(
-        self,
-        expected: StreamSpec | None = None,
-        timeout: float = 10.0,
-        stop: threading.Event | None = None,
-    ) -> StreamSpec:
+    def open_input(self, expected: StreamSpec | None = None, timeout: float = 10.0,
+                   stop: threading.Event | None = None) -> StreamSpec:
         # The file is there or not: nothing to wait for, so neither timeout nor stop applies.
         self.close()
         if not self.path.is_file():

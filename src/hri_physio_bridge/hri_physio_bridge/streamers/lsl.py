@@ -133,12 +133,8 @@ class LslStreamer(Streamer):
             f"LSL stream {self._predicate()} did not appear within {timeout:g} s. Streams seen: {listing}"
         )
 
-    def open_input(
-        self,
-        expected: StreamSpec | None = None,
-        timeout: float = 10.0,
-        stop: threading.Event | None = None,
-    ) -> StreamSpec:
+    def open_input(self, expected: StreamSpec | None = None, timeout: float = 10.0,
+                   stop: threading.Event | None = None) -> StreamSpec:
         self.close()
         info = self._resolve(timeout, stop)
         spec = _spec_from_info(info)

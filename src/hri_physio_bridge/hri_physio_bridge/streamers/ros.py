@@ -56,12 +56,8 @@ class RosStreamer(Streamer):
         self._bad_log = RateLimitedLog(on_bad_message or (lambda text: node.get_logger().error(text)))
 
     # -- input ---------------------------------------------------------------
-    def open_input(
-        self,
-        expected: StreamSpec | None = None,
-        timeout: float = 10.0,
-        stop: threading.Event | None = None,
-    ) -> StreamSpec:
+    def open_input(self, expected: StreamSpec | None = None, timeout: float = 10.0,
+                   stop: threading.Event | None = None) -> StreamSpec:
         # A subscription needs no publisher to exist: nothing to wait for (timeout, stop unused).
         self.close()
         spec = expected or StreamSpec(name=self.topic)

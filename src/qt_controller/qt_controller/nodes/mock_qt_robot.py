@@ -47,14 +47,7 @@ class MockQtRobotNode(ManagedNode):
         self.config = v = self.declare_config(config)
         limits = JointLimits.default().with_overrides(parse_limit_overrides(v.joint_limits))
         gestures = GestureLibrary.from_dirs([default_gesture_dir(), *v.gesture_dirs], limits)
-        mock_config = MockConfig(
-            speech_seconds_per_char=v.speech_seconds_per_char,
-            emotion_seconds=v.emotion_seconds,
-            max_joint_speed=v.max_joint_speed,
-            default_velocity=v.default_velocity,
-            default_volume=v.default_volume,
-            gesture_busy_policy=v.gesture_busy_policy,
-        )
+        mock_config = v.settings(MockConfig)
         emotions = EmotionCatalogue([*STANDARD_EMOTIONS, *v.extra_emotions])
         self.robot = MockRobot(self._now, gestures, emotions, mock_config, limits)
         self.events = self.create_publisher(String, v.events_topic, event_qos())
