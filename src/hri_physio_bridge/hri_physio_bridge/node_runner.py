@@ -239,7 +239,7 @@ def fail(prog: str, message: str) -> int:
 def run_node(
     prog: str,
     config_cls: type[C],
-    make_node: Callable[[C, argparse.Namespace], ManagedNode],
+    make_node: type[ManagedNode] | Callable[[C, argparse.Namespace], ManagedNode],
     *,
     argv: Sequence[str] | None = None,
     description: str | None = None,
@@ -251,9 +251,10 @@ def run_node(
 ) -> int:
     """Parse, validate, init, build, spin, stop: the life of one node process. Returns the exit status.
 
-    ``make_node(config, args)`` builds the node from the options resolved so far (it should call
-    :meth:`ManagedNode.declare_config`). Exceptions in ``startup_errors`` raised while building
-    are reported like configuration errors (one line, status 2).
+    ``make_node`` is the node class, built as ``make_node(config)``, or a factory
+    ``make_node(config, args)`` for a node that also needs the extra flags (``extra_arguments``); the
+    node should call :meth:`ManagedNode.declare_config`. Exceptions in ``startup_errors`` raised
+    while building are reported like configuration errors (one line, status 2).
 
     ``offline(config, args)``, if given, runs before ROS starts: a mode that needs no ROS
     (``replayer --info``, ``recorder --repair``) returns its exit status there; None goes on.
@@ -288,7 +289,7 @@ def run_node(
     spinner: ExecutorThread | None = None
     try:
         try:
-            node = make_node(config, args)
+            node = make_node(config) if isinstance(make_node, type) else make_node(config, args)
         except (ConfigError, ParameterException, NameValidationException, *startup_errors) as exc:
             return fail(prog, _one_line(exc))
         stop = install_stop_handlers(node.on_stop)

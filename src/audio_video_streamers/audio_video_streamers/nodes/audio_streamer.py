@@ -11,7 +11,6 @@ Requests: ``beat:<bpm>``, ``relaxing``, ``file:<path>@<bpm>`` (stretched), ``<pa
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import threading
@@ -79,13 +78,9 @@ class AudioStreamerNode(ManagedNode):
         self.publish_status(replace(final, state=State.STOPPED))
 
 
-def _make_node(config: AudioStreamerConfig, _args: argparse.Namespace) -> AudioStreamerNode:
-    return AudioStreamerNode(config)
-
-
 def main(argv: list[str] | None = None) -> int:
     return run_node(
-        PROG, AudioStreamerConfig, _make_node, argv=argv, startup_errors=(SinkError,),
+        PROG, AudioStreamerConfig, AudioStreamerNode, argv=argv, startup_errors=(SinkError,),
         description="Play the coach's music: built-in beats at any tempo, a relaxing pad and user tracks "
         "(time-stretched to a tempo on request), cross-faded, looped, optionally recorded to WAV.",
         epilog="examples:" + __doc__.split("Examples::")[1].replace("``", "") if __doc__ else None,

@@ -12,7 +12,6 @@ Requests: ``splash``, ``relaxing``, ``marching``, ``step_up``, ``lateral``, ``ar
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import threading
@@ -99,13 +98,9 @@ class VideoStreamerNode(ManagedNode):
         self.publish_status(replace(self.player.status(), state=State.STOPPED))
 
 
-def _make_node(config: VideoStreamerConfig, _args: argparse.Namespace) -> VideoStreamerNode:
-    return VideoStreamerNode(config)
-
-
 def main(argv: list[str] | None = None) -> int:
     return run_node(
-        PROG, VideoStreamerConfig, _make_node, argv=argv, startup_errors=(DisplayError,),
+        PROG, VideoStreamerConfig, VideoStreamerNode, argv=argv, startup_errors=(DisplayError,),
         description="Show the coach's videos: reference videos from files (looped, at their frame rate) "
         "and built-in screens (splash, relaxing, activity placeholders at the music's tempo), "
         "with a JPEG preview of the screen for the session bag.",

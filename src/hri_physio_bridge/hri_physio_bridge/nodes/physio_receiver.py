@@ -9,7 +9,6 @@ Examples::
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import threading
@@ -117,13 +116,9 @@ def _console(receiver: PhysioReceiver, stop: threading.Event, stream: Any = sys.
     stop.set()  # stdin closed
 
 
-def _make_node(config: ReceiverConfig, _args: argparse.Namespace) -> PhysioReceiverNode:
-    return PhysioReceiverNode(config)
-
-
 def main(argv: list[str] | None = None) -> int:
     return run_node(
-        PROG, ReceiverConfig, _make_node, argv=argv, startup_errors=(StreamerError,),
+        PROG, ReceiverConfig, PhysioReceiverNode, argv=argv, startup_errors=(StreamerError,),
         description="Forward a physiological stream between LSL, ROS 2 and CSV through a ring buffer "
         "(sliding-window frames, CSV logging, gap and overflow reporting).",
     )

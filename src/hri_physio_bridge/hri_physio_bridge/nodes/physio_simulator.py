@@ -17,7 +17,6 @@ Examples:
 
 from __future__ import annotations
 
-import argparse
 import sys
 import threading
 from typing import Any
@@ -103,12 +102,8 @@ class PhysioSimulatorNode(ManagedNode):
         return ", ".join(f"{sig}: {src.sent}" for sig, src in self.sources.items())
 
 
-def _make_node(config: SimulatorConfig, _args: argparse.Namespace) -> PhysioSimulatorNode:
-    return PhysioSimulatorNode(config)
-
-
 def main(argv: list[str] | None = None) -> int:
-    return run_node(PROG, SimulatorConfig, _make_node, argv=argv, description=__doc__)
+    return run_node(PROG, SimulatorConfig, PhysioSimulatorNode, argv=argv, description=__doc__)
 
 
 if __name__ == "__main__":

@@ -20,7 +20,6 @@ Examples::
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import sys
@@ -335,12 +334,8 @@ def _stdin_reader(node: QtPhysioCoachNode) -> None:
         node.request(line)
 
 
-def _make_node(config: CoachNodeConfig, _args: argparse.Namespace) -> QtPhysioCoachNode:
-    return QtPhysioCoachNode(config)
-
-
 def main(argv: list[str] | None = None) -> int:
-    return run_node(PROG, CoachNodeConfig, _make_node, argv=argv, description=__doc__,
+    return run_node(PROG, CoachNodeConfig, QtPhysioCoachNode, argv=argv, description=__doc__,
                     default_conf=default_config_file(), startup_errors=(CoachError, RoutineError))
 
 

@@ -21,7 +21,6 @@ Examples::
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import threading
@@ -189,12 +188,8 @@ class SimulatedParticipantNode(ManagedNode):
             outlet.close()
 
 
-def _make_node(config: ParticipantNodeConfig, _args: argparse.Namespace) -> SimulatedParticipantNode:
-    return SimulatedParticipantNode(config)
-
-
 def main(argv: list[str] | None = None) -> int:
-    return run_node(PROG, ParticipantNodeConfig, _make_node, argv=argv, description=__doc__,
+    return run_node(PROG, ParticipantNodeConfig, SimulatedParticipantNode, argv=argv, description=__doc__,
                     startup_errors=(StreamerError,))
 
 

@@ -22,16 +22,7 @@ from matplotlib.ticker import MultipleLocator
 
 from hri_physio_coach.report.bagdata import BagTables
 from hri_physio_coach.report.metrics import HeartRate, feature_times, hrv_series
-from hri_physio_coach.report.timeline import (
-    EXERCISE_KINDS,
-    NO_CHANGE,
-    NO_UPDATE,
-    SLOW_DOWN,
-    SPEED_UP,
-    SessionClock,
-    Span,
-    Timeline,
-)
+from hri_physio_coach.report.timeline import EXERCISE_KINDS, RuleOutcome, SessionClock, Span, Timeline
 from hri_physio_coach.zones import HeartRateZone, fuzzy_probability
 
 DPI = 150
@@ -42,10 +33,10 @@ HR_COLOR = "#1b3a6b"
 PHASE_COLORS = {"calibration": "#7f8fa6", "warm_up": "#e0a030", "conditioning": "#c8473d",
                 "cool_down": "#3f7fbf"}
 OUTCOME_STYLE = {
-    SPEED_UP: {"marker": "^", "color": "#2a9d3c", "size": 46},
-    SLOW_DOWN: {"marker": "v", "color": "#d1342f", "size": 46},
-    NO_CHANGE: {"marker": "o", "color": "#8a8a8a", "size": 22},
-    NO_UPDATE: {"marker": "X", "color": "#444444", "size": 30},
+    RuleOutcome.SPEED_UP: {"marker": "^", "color": "#2a9d3c", "size": 46},
+    RuleOutcome.SLOW_DOWN: {"marker": "v", "color": "#d1342f", "size": 46},
+    RuleOutcome.NO_CHANGE: {"marker": "o", "color": "#8a8a8a", "size": 22},
+    RuleOutcome.NO_UPDATE: {"marker": "X", "color": "#444444", "size": 30},
 }
 TEMPO_COLOR = "#7b4fa0"
 SPEED_COLOR = "#b0642a"
@@ -140,7 +131,7 @@ def hr_session_figure(path: Path, timeline: Timeline, hr: HeartRate | None, titl
         if not ups:
             continue
         xs = [_minutes(u.t, t0) for u in ups]
-        if outcome == NO_UPDATE:
+        if outcome == RuleOutcome.NO_UPDATE:
             ys = [u.hr for u in ups]
             base = min(y_values) - 4 if y_values else (zone.low - 10 if zone else 60)
             ys = [base if v is None else v for v in ys]
@@ -150,7 +141,7 @@ def hr_session_figure(path: Path, timeline: Timeline, hr: HeartRate | None, titl
                    edgecolors="black", linewidths=0.5, zorder=5)
         handles.append(Line2D([], [], ls="", marker=style["marker"], color=style["color"],
                               markeredgecolor="black", markeredgewidth=0.5,
-                              markersize=7 if outcome != NO_CHANGE else 5,
+                              markersize=7 if outcome != RuleOutcome.NO_CHANGE else 5,
                               label=f"Rule update: {outcome} ({len(ups)})"))
         y_values += [v for v in ys if v is not None]
 
@@ -295,7 +286,7 @@ def fuzzy_overlay_figure(path: Path, timeline: Timeline, hr: HeartRate | None, t
     ax_p.scatter([_minutes(u.t, t0) for u in took], [u.p for u in took], s=50, facecolors="none",
                  edgecolors="#d1342f", lw=1.3, zorder=6, label=f"draw < p ({len(took)})")
     for u in timeline.rule_updates:
-        if u.hr is not None and u.outcome in (SPEED_UP, SLOW_DOWN):
+        if u.hr is not None and u.outcome in (RuleOutcome.SPEED_UP, RuleOutcome.SLOW_DOWN):
             style = OUTCOME_STYLE[u.outcome]
             ax.scatter([_minutes(u.t, t0)], [u.hr], marker=style["marker"], s=style["size"],
                        color=style["color"], edgecolors="black", linewidths=0.5, zorder=5)
@@ -308,7 +299,8 @@ def fuzzy_overlay_figure(path: Path, timeline: Timeline, hr: HeartRate | None, t
                 transform=ax.get_xaxis_transform(), fontsize=8, va="top", color="#555555")
     changes = [Line2D([], [], ls="", marker=OUTCOME_STYLE[o]["marker"], color=OUTCOME_STYLE[o]["color"],
                       markeredgecolor="black", markeredgewidth=0.5, label=o)
-               for o in (SPEED_UP, SLOW_DOWN) if any(u.outcome == o for u in timeline.rule_updates)]
+               for o in (RuleOutcome.SPEED_UP, RuleOutcome.SLOW_DOWN)
+               if any(u.outcome == o for u in timeline.rule_updates)]
     if changes:
         ax.legend(handles=[Patch(facecolor=ZONE_COLOR, label="target zone"), *changes], loc="lower right",
                   fontsize=7.5, framealpha=0.92)

@@ -16,15 +16,7 @@ from typing import Any
 import numpy as np
 
 from hri_physio_coach.report.bagdata import BagTables, FrameStream
-from hri_physio_coach.report.timeline import (
-    EXERCISE_KINDS,
-    NO_CHANGE,
-    NO_UPDATE,
-    SLOW_DOWN,
-    SPEED_UP,
-    SessionClock,
-    Timeline,
-)
+from hri_physio_coach.report.timeline import EXERCISE_KINDS, RuleOutcome, SessionClock, Timeline
 
 HR_CHANNELS = ("hr", "bpm", "heart_rate")
 FLAG_CHANNEL = "flag"
@@ -180,8 +172,8 @@ def _adaptations(timeline: Timeline) -> dict[str, Any]:
     per_phase: dict[str, dict[str, int]] = {}
     for u in timeline.rule_updates:
         phase = u.phase or "(none)"
-        row = per_phase.setdefault(phase, {"rule_updates": 0, "adaptations": 0, SPEED_UP: 0, SLOW_DOWN: 0,
-                                           NO_CHANGE: 0, NO_UPDATE: 0})
+        row = per_phase.setdefault(phase, {"rule_updates": 0, "adaptations": 0,
+                                           **dict.fromkeys(RuleOutcome, 0)})
         row["rule_updates"] += 1
         row["adaptations"] += int(u.delta != 0)
         row[u.outcome] += 1
@@ -216,7 +208,7 @@ def _robot(tables: BagTables, timeline: Timeline) -> dict[str, Any]:
 
 def _signal_quality(tables: BagTables, timeline: Timeline, clock: SessionClock) -> dict[str, Any]:
     gated = Counter(re.sub(r"\d+(\.\d+)?", "N", u.reason) for u in timeline.rule_updates
-                    if u.outcome == NO_UPDATE)
+                    if u.outcome == RuleOutcome.NO_UPDATE)
     gaps = [{"start_s": _clean(g["silent_since"] - timeline.t0, 1),
              "end_s": _clean(g["resumed"] - timeline.t0, 1) if g["resumed"] is not None else None,
              "seconds": _clean(g["seconds"], 1)} for g in timeline.hr_gaps]

@@ -11,14 +11,23 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Any
 
 import numpy as np
 
 from hri_physio_coach.report.bagdata import BagTables, JsonMessage
 
-#: Rule-update outcomes as the thesis's figures name them.
-SPEED_UP, SLOW_DOWN, NO_CHANGE, NO_UPDATE = "speed up", "slow down", "no change", "no update (no HR)"
+
+class RuleOutcome(StrEnum):
+    """What a rule update did, as the thesis's figures name it (the values are the labels)."""
+
+    SPEED_UP = "speed up"
+    SLOW_DOWN = "slow down"
+    NO_CHANGE = "no change"
+    NO_UPDATE = "no update (no HR)"
+
+
 EXERCISE_KINDS = ("warm_up", "conditioning", "cool_down")
 
 
@@ -72,7 +81,7 @@ class RuleUpdate:
     phase: str | None
     phase_kind: str | None
     action: str  # the coach's own action name
-    outcome: str  # SPEED_UP | SLOW_DOWN | NO_CHANGE | NO_UPDATE
+    outcome: RuleOutcome
     delta: int
     hr: float | None
     p: float | None
@@ -116,12 +125,13 @@ class Timeline:
     hr_topic: str | None = None  # if the coach said so in its events/state
 
 
-def outcome_of(decision: dict[str, Any]) -> str:
+def outcome_of(decision: dict[str, Any]) -> RuleOutcome:
     action = str(decision.get("action", ""))
     if action == "gated":
-        return NO_UPDATE
+        return RuleOutcome.NO_UPDATE
     delta = int(decision.get("delta") or 0)
-    return SPEED_UP if delta > 0 else SLOW_DOWN if delta < 0 else NO_CHANGE
+    return (RuleOutcome.SPEED_UP if delta > 0 else RuleOutcome.SLOW_DOWN if delta < 0
+            else RuleOutcome.NO_CHANGE)
 
 
 def _num(value: Any) -> float | None:

@@ -22,7 +22,6 @@ Examples::
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import threading
@@ -108,13 +107,9 @@ class NeurokitProcessorNode(ManagedNode):
         self.status_pub.wait_for_all_acked(Duration(seconds=1.0))
 
 
-def _make_node(config: ProcessorConfig, _args: argparse.Namespace) -> NeurokitProcessorNode:
-    return NeurokitProcessorNode(config)
-
-
 def main(argv: list[str] | None = None) -> int:
     return run_node(
-        PROG, ProcessorConfig, _make_node, argv=argv, startup_errors=(StreamerError, ValueError),
+        PROG, ProcessorConfig, NeurokitProcessorNode, argv=argv, startup_errors=(StreamerError, ValueError),
         description=__doc__, epilog="The seed's --conf keys buffer (samples per window) and window "
         "(samples kept for the next window) are translated to window_seconds and hop_seconds.",
     )

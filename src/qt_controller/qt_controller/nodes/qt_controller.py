@@ -15,7 +15,6 @@ Examples::
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import threading
@@ -107,13 +106,9 @@ def _console(node: QtControllerNode, stream: Any = None) -> None:
     node.submit("exit", remote=False)  # stdin closed
 
 
-def _make_node(config: QtControllerConfig, _args: argparse.Namespace) -> QtControllerNode:
-    return QtControllerNode(config)
-
-
 def main(argv: list[str] | None = None) -> int:
     return run_node(
-        PROG, QtControllerConfig, _make_node, argv=argv, startup_errors=(ValueError,),
+        PROG, QtControllerConfig, QtControllerNode, argv=argv, startup_errors=(ValueError,),
         description="Drive the QT robot (or mock_qt_robot) from text commands on /QtController/input; "
         "one JSON reply per line goes to /QtController/output.", epilog=HELP_TEXT,
     )
