@@ -20,10 +20,13 @@ Tempos are accepted in [40, 240] BPM. Relative paths are taken from a media dire
 
 from __future__ import annotations
 
+import queue
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Literal, TypeVar
+
+T = TypeVar("T")
 
 TEMPO_MIN = 40.0
 TEMPO_MAX = 240.0
@@ -144,3 +147,13 @@ def parse_video_request(text: str, media_dir: Path | None = None) -> VideoReques
         raise RequestError(f"unknown video source {scheme + ':'!r} in {request!r} (known: "
                            f"{', '.join(VIDEO_SCREENS + ACTIVITIES)}, file:<path>, or a file path)")
     return VideoRequest(request, "file", path=_media_path(request, media_dir, request))
+
+
+def take_queued(q: queue.Queue[T]) -> list[T]:
+    """Everything waiting in ``q`` now, oldest first, without blocking (a player's requests or commands)."""
+    out: list[T] = []
+    while True:
+        try:
+            out.append(q.get_nowait())
+        except queue.Empty:
+            return out

@@ -25,7 +25,7 @@ from audio_video_streamers.audio.mixer import Mixer
 from audio_video_streamers.audio.sinks import AudioSink
 from audio_video_streamers.audio.track import Track
 from audio_video_streamers.pacing import Clock
-from audio_video_streamers.requests import RequestError, parse_audio_request, unexpected_failure
+from audio_video_streamers.requests import RequestError, parse_audio_request, take_queued, unexpected_failure
 from audio_video_streamers.status import MediaStatus, RequestLedger
 
 StatusCallback = Callable[[MediaStatus], None]
@@ -70,21 +70,13 @@ class AudioPlayer:
                 first = self._requests.get(timeout=0.1)
             except queue.Empty:
                 continue
-            self._prepare([first, *self._drain()])
+            self._prepare([first, *take_queued(self._requests)])
 
     def prepare_pending(self) -> None:
         """Prepare every queued request now, on this thread (what the loader does; for tests and tools)."""
-        waiting = self._drain()
+        waiting = take_queued(self._requests)
         if waiting:
             self._prepare(waiting)
-
-    def _drain(self) -> list[str]:
-        out = []
-        while True:
-            try:
-                out.append(self._requests.get_nowait())
-            except queue.Empty:
-                return out
 
     def _prepare(self, waiting: list[str]) -> None:
         """Resolve the newest playable request of ``waiting`` (plus any arriving meanwhile)."""
@@ -99,7 +91,7 @@ class AudioPlayer:
                 for older in [*waiting, *([ready.text] if ready else [])]:
                     self.ledger.settle(older, "superseded")
                 waiting, ready = [], command
-            waiting.extend(self._drain())  # newer than everything above: tried first
+            waiting.extend(take_queued(self._requests))  # newer than everything above: tried first
         if ready is not None:
             self._commands.put(ready)
 
@@ -142,11 +134,7 @@ class AudioPlayer:
         return True
 
     def _apply_commands(self) -> None:
-        while True:
-            try:
-                command = self._commands.get_nowait()
-            except queue.Empty:
-                return
+        for command in take_queued(self._commands):
             with self._lock:
                 if command.track is None:
                     self.mixer.stop()

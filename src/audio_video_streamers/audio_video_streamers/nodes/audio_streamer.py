@@ -11,37 +11,29 @@ Requests: ``beat:<bpm>``, ``relaxing``, ``file:<path>@<bpm>`` (stretched), ``<pa
 
 from __future__ import annotations
 
-import json
 import sys
-import threading
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
-
-from std_msgs.msg import String
 
 from audio_video_streamers.audio.config import AudioStreamerConfig
 from audio_video_streamers.audio.library import AudioLibrary
 from audio_video_streamers.audio.player import AudioPlayer
 from audio_video_streamers.audio.sinks import SinkError, open_sink
 from audio_video_streamers.audio.stretch import StretchCache
-from audio_video_streamers.status import MediaStatus, State
+from audio_video_streamers.nodes.media_node import MediaStreamerNode
 from hri_physio_bridge import topics
-from hri_physio_bridge.node_runner import ManagedNode, logic_logger, run_node
-from hri_physio_bridge.qos import command_qos, event_qos
+from hri_physio_bridge.node_runner import logic_logger, run_node
 
 PROG = "audio_streamer"
 
 
-class AudioStreamerNode(ManagedNode):
+class AudioStreamerNode(MediaStreamerNode):
     """ROS 2 shell around :class:`AudioPlayer`: request subscription, status publisher, the clock."""
 
     def __init__(self, config: AudioStreamerConfig, **kwargs: Any) -> None:
-        super().__init__(PROG, **kwargs)
+        super().__init__(PROG, topics.AUDIO_STATUS, **kwargs)
         self.config = cfg = self.declare_config(config)
         log = logic_logger(self.get_name(), self.get_logger())
-        self._publish_lock = threading.Lock()
-        self.status_pub = self.create_publisher(String, topics.AUDIO_STATUS, event_qos())
         sink = open_sink(cfg.sink, cfg.rate, cfg.channels, self.now, log, device=cfg.device,
                          block=cfg.block, latency=cfg.latency, record_wav=cfg.record_wav,
                          record_format=cfg.record_format)
@@ -49,33 +41,11 @@ class AudioStreamerNode(ManagedNode):
         library = AudioLibrary(cfg.rate, cfg.channels, declick=cfg.declick, stretch_cache=cache,
                                memory_bytes=cfg.memory_cache_mb * 2**20, log=log)
         media_dir = Path(cfg.media_dir).expanduser() if cfg.media_dir else None
-        self.player = AudioPlayer(library, sink, fade=cfg.fade, block=cfg.block, clock=self.now,
-                                  on_status=self.publish_status, media_dir=media_dir, log=log)
-        self.create_subscription(String, topics.AUDIO_REQUEST, self._on_request, command_qos())
-        self.create_timer(1.0 / cfg.status_rate, lambda: self.publish_status(self.player.status()))
+        self.attach(AudioPlayer(library, sink, fade=cfg.fade, block=cfg.block, clock=self.now,
+                                on_status=self.publish_status, media_dir=media_dir, log=log),
+                    topics.AUDIO_REQUEST, cfg.status_rate)
         if cfg.initial:
             self.player.request(cfg.initial)
-
-    def now(self) -> float:
-        """The node's ROS time in seconds (follows /clock under use_sim_time)."""
-        return self.get_clock().now().nanoseconds * 1e-9
-
-    def _on_request(self, msg: String) -> None:
-        self.player.request(msg.data)
-
-    def publish_status(self, status: MediaStatus) -> None:
-        data = status.as_dict()
-        data["node"] = self.get_fully_qualified_name()
-        with self._publish_lock:
-            self.status_pub.publish(String(data=json.dumps(data)))
-
-    def run(self, stop: threading.Event) -> int:
-        return self.player.run(stop)
-
-    def close(self) -> None:
-        self.player.close()
-        final = self.player.status()
-        self.publish_status(replace(final, state=State.STOPPED))
 
 
 def main(argv: list[str] | None = None) -> int:

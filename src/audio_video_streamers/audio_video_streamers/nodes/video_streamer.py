@@ -14,8 +14,6 @@ from __future__ import annotations
 
 import json
 import sys
-import threading
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -23,48 +21,41 @@ import numpy as np
 from sensor_msgs.msg import CompressedImage
 from std_msgs.msg import String
 
-from audio_video_streamers.status import MediaStatus, State
+from audio_video_streamers.nodes.media_node import MediaStreamerNode
+from audio_video_streamers.status import State
 from audio_video_streamers.video.config import VideoStreamerConfig
 from audio_video_streamers.video.display import DisplayError, open_display
 from audio_video_streamers.video.player import VideoPlayer
 from audio_video_streamers.video.preview import encode_jpeg
 from hri_physio_bridge import topics
-from hri_physio_bridge.node_runner import ManagedNode, logic_logger, run_node
-from hri_physio_bridge.qos import command_qos, event_qos
+from hri_physio_bridge.node_runner import logic_logger, run_node
+from hri_physio_bridge.qos import event_qos
 
 PROG = "video_streamer"
 PLAYING = (str(State.PLAYING), str(State.FADING))
 
 
-class VideoStreamerNode(ManagedNode):
+class VideoStreamerNode(MediaStreamerNode):
     """ROS 2 shell around :class:`VideoPlayer`: requests, the audio tempo, status and preview topics."""
 
+    player: VideoPlayer
+
     def __init__(self, config: VideoStreamerConfig, **kwargs: Any) -> None:
-        super().__init__(PROG, **kwargs)
+        super().__init__(PROG, topics.VIDEO_STATUS, **kwargs)
         self.config = cfg = self.declare_config(config)
         log = logic_logger(self.get_name(), self.get_logger())
-        self._publish_lock = threading.Lock()
-        self.status_pub = self.create_publisher(String, topics.VIDEO_STATUS, event_qos())
         self.preview_pub = self.create_publisher(CompressedImage, topics.VIDEO_PREVIEW, 10)
         display = open_display(cfg.display, log, fullscreen=cfg.fullscreen)
-        self.player = VideoPlayer(
+        player = VideoPlayer(
             display, size=(cfg.width, cfg.height), fps=cfg.fps, preview_rate=cfg.preview_rate,
             default_tempo=cfg.tempo, title=cfg.title, clock=self.now, on_status=self.publish_status,
             on_preview=self.publish_preview, log=log,
             media_dir=Path(cfg.media_dir).expanduser() if cfg.media_dir else None,
         )
-        self.create_subscription(String, topics.VIDEO_REQUEST, self._on_request, command_qos())
+        self.attach(player, topics.VIDEO_REQUEST, cfg.status_rate)
         if cfg.follow_audio:
             self.create_subscription(String, topics.AUDIO_STATUS, self._on_audio_status, event_qos())
-        self.create_timer(1.0 / cfg.status_rate, lambda: self.publish_status(self.player.status()))
-        self.player.request(cfg.initial)
-
-    def now(self) -> float:
-        """The node's ROS time in seconds (follows /clock under use_sim_time)."""
-        return self.get_clock().now().nanoseconds * 1e-9
-
-    def _on_request(self, msg: String) -> None:
-        self.player.request(msg.data)
+        player.request(cfg.initial)
 
     def _on_audio_status(self, msg: String) -> None:
         try:
@@ -75,12 +66,6 @@ class VideoStreamerNode(ManagedNode):
             tempo = status.get("tempo")
             self.player.set_audio_tempo(float(tempo) if isinstance(tempo, int | float) else None)
 
-    def publish_status(self, status: MediaStatus) -> None:
-        data = status.as_dict()
-        data["node"] = self.get_fully_qualified_name()
-        with self._publish_lock:
-            self.status_pub.publish(String(data=json.dumps(data)))
-
     def publish_preview(self, frame: np.ndarray, t: float) -> None:
         msg = CompressedImage()
         msg.header.stamp.sec = int(t)
@@ -89,13 +74,6 @@ class VideoStreamerNode(ManagedNode):
         msg.format = "jpeg"
         msg.data = encode_jpeg(frame, self.config.preview_quality)
         self.preview_pub.publish(msg)
-
-    def run(self, stop: threading.Event) -> int:
-        return self.player.run(stop)
-
-    def close(self) -> None:
-        self.player.close()
-        self.publish_status(replace(self.player.status(), state=State.STOPPED))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from audio_video_streamers.pacing import Clock, Pacer, Sleeper, wait_on_event
-from audio_video_streamers.requests import RequestError, parse_video_request, unexpected_failure
+from audio_video_streamers.requests import RequestError, parse_video_request, take_queued, unexpected_failure
 from audio_video_streamers.status import MediaStatus, RequestLedger, State
 from audio_video_streamers.video.display import Display
 from audio_video_streamers.video.sources import VideoSource, open_source
@@ -79,11 +79,7 @@ class VideoPlayer:
 
     # --- rendering ---------------------------------------------------------------------------
     def _apply_requests(self) -> None:
-        while True:
-            try:
-                text = self._requests.get_nowait()
-            except queue.Empty:
-                return
+        for text in take_queued(self._requests):
             try:
                 request = parse_video_request(text, self.media_dir)
                 source = open_source(request, self.size, self.fps, tempo=self.current_tempo, title=self.title)

@@ -1,0 +1,67 @@
+"""What the audio and video streamer nodes share: a player driven by a request topic, its status out."""
+
+from __future__ import annotations
+
+import json
+import threading
+from dataclasses import replace
+from typing import Any, Protocol
+
+from std_msgs.msg import String
+
+from audio_video_streamers.status import MediaStatus, State
+from hri_physio_bridge.node_runner import ManagedNode
+from hri_physio_bridge.qos import command_qos, event_qos
+
+
+class MediaPlayer(Protocol):
+    """The part of AudioPlayer and VideoPlayer a node drives."""
+
+    def request(self, text: str) -> None: ...
+
+    def status(self, error: tuple[str, str] | None = None) -> MediaStatus: ...
+
+    def run(self, stop: threading.Event) -> int: ...
+
+    def close(self) -> None: ...
+
+
+class MediaStreamerNode(ManagedNode):
+    """A ROS 2 shell around one media player.
+
+    The subclass builds its player (with ``clock=self.now`` and ``on_status=self.publish_status``) and
+    hands it to :meth:`attach`, which subscribes the request topic and publishes the status at
+    ``status_rate``. Every status message carries the node's name; the last one says STOPPED.
+    """
+
+    player: MediaPlayer
+
+    def __init__(self, prog: str, status_topic: str, **kwargs: Any) -> None:
+        super().__init__(prog, **kwargs)
+        self._publish_lock = threading.Lock()  # the player's thread and the executor both publish
+        self.status_pub = self.create_publisher(String, status_topic, event_qos())
+
+    def attach(self, player: MediaPlayer, request_topic: str, status_rate: float) -> None:
+        self.player = player
+        self.create_subscription(String, request_topic, self._on_request, command_qos())
+        self.create_timer(1.0 / status_rate, lambda: self.publish_status(self.player.status()))
+
+    def now(self) -> float:
+        """The node's ROS time in seconds (follows /clock under use_sim_time)."""
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def _on_request(self, msg: String) -> None:
+        self.player.request(msg.data)
+
+    def publish_status(self, status: MediaStatus) -> None:
+        data = status.as_dict()
+        data["node"] = self.get_fully_qualified_name()
+        with self._publish_lock:
+            self.status_pub.publish(String(data=json.dumps(data)))
+
+    def run(self, stop: threading.Event) -> int:
+        return self.player.run(stop)
+
+    def close(self) -> None:
+        self.player.close()
+        self.publish_status(replace(self.player.status(), state=State.STOPPED))
