@@ -13,13 +13,12 @@
 
 from __future__ import annotations
 
-import json
-import math
-import os
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
 from typing import Any
+
+from hri_physio_bridge.json_files import strict_json, write_text_atomic
 
 BAG_DIR = "bag"
 LOG_DIR = "logs"
@@ -79,10 +78,7 @@ class SessionFolder:
 
     def write_summary(self, summary: dict[str, Any]) -> Path:
         """``summary.json``, replaced atomically (a reader never sees half a file)."""
-        tmp = self.summary_file.with_suffix(".json.tmp")
-        tmp.write_text(json.dumps(_finite(summary), indent=2, allow_nan=False) + "\n", encoding="utf-8")
-        os.replace(tmp, self.summary_file)
-        return self.summary_file
+        return write_text_atomic(self.summary_file, strict_json(summary, indent=2) + "\n")
 
     def display(self, cwd: Path | None = None) -> str:
         """The folder's path as the user should type it (relative to ``cwd`` when inside it)."""
@@ -91,16 +87,3 @@ class SessionFolder:
             return str(self.path.resolve().relative_to(cwd.resolve()))
         except ValueError:
             return str(self.path.resolve())
-
-
-def _finite(value: Any) -> Any:
-    """JSON has no NaN/inf: they become null (recursively)."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {str(k): _finite(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_finite(v) for v in value]
-    if isinstance(value, Path):
-        return str(value)
-    return value

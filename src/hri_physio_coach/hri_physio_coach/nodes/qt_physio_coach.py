@@ -21,7 +21,6 @@ Examples::
 from __future__ import annotations
 
 import json
-import math
 import sys
 import threading
 from collections import Counter
@@ -35,6 +34,7 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray, String
 
 from hri_physio_bridge.frames import FrameFormatError
+from hri_physio_bridge.json_files import strict_json
 from hri_physio_bridge.node_runner import ManagedNode, run_node
 from hri_physio_bridge.qos import command_qos, event_qos, frame_qos, latched_qos
 from hri_physio_bridge.rate_limit import RateLimitedLog
@@ -297,20 +297,9 @@ class QtPhysioCoachNode(ManagedNode):
             pub.wait_for_all_acked(Duration(seconds=timeout))
 
 
-def _finite(value: Any) -> Any:
-    """JSON has no NaN/inf: they become null (recursively)."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_finite(v) for v in value]
-    return value
-
-
 def to_json(event: dict[str, Any]) -> str:
     """One event as strict JSON (anything not JSON-native is written as text)."""
-    return json.dumps(_finite(event), allow_nan=False, default=str)
+    return strict_json(event, default=str)
 
 
 def _summary(event: dict[str, Any]) -> str:

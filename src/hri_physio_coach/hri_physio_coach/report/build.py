@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import json
 import math
-import os
 import re
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -12,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from hri_physio_bridge import topics
+from hri_physio_bridge.json_files import json_safe, strict_json, write_text_atomic
 from hri_physio_coach.report import figures as plots
 from hri_physio_coach.report import metrics, page
 from hri_physio_coach.report.bagdata import BagTables, ReportError, read_bag
@@ -95,28 +94,6 @@ def _figures(out_dir: Path, timeline: Timeline, tables: BagTables, clock: Sessio
     return files
 
 
-def _write_atomic(path: Path, text: str) -> None:
-    """Write next to ``path`` and rename: a reader never sees half a report."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
-def _json_safe(value: Any) -> Any:
-    """NaN/inf (a coach event may carry them) as null: report.json stays strict JSON."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {str(k): _json_safe(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_json_safe(v) for v in value]
-    return value
-
-
 def make_report(path: Path | str, out: Path | str | None = None, hr_topic: str | None = None,
                 figures: bool = True) -> ReportResult:
     """Read the bag of a session folder / bag directory / .mcap file and write the report files.
@@ -194,10 +171,10 @@ def make_report(path: Path | str, out: Path | str | None = None, hr_topic: str |
         "figures": {k: p.name for k, p in files.items()},
     }
     json_path = out_dir / REPORT_JSON
-    report = _json_safe(report)
-    _write_atomic(json_path, json.dumps(report, indent=2, ensure_ascii=False, allow_nan=False) + "\n")
+    report = json_safe(report)
+    write_text_atomic(json_path, strict_json(report, indent=2, ensure_ascii=False) + "\n")
     html_path = out_dir / REPORT_HTML
-    _write_atomic(html_path, page.render(report, files, where.configs))
+    write_text_atomic(html_path, page.render(report, files, where.configs))
     files["report_json"] = json_path
     files["report_html"] = html_path
     return ReportResult(out_dir, files, report, list(tables.warnings), missing)
