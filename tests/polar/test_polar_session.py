@@ -15,7 +15,12 @@ from hri_physio_bridge.polar import control_point as cp
 from hri_physio_bridge.polar.ble import BleUnavailableError
 from hri_physio_bridge.polar.capture import CaptureWriter, read_capture
 from hri_physio_bridge.polar.config import PolarConfig
-from hri_physio_bridge.polar.encode import encode_compressed_frame, encode_ppg_frame, encode_ppi_frame
+from hri_physio_bridge.polar.encode import (
+    encode_compressed_frame,
+    encode_heart_rate,
+    encode_ppg_frame,
+    encode_ppi_frame,
+)
 from hri_physio_bridge.polar.fake import (
     FakeClock,
     FakePolarDevice,
@@ -23,7 +28,7 @@ from hri_physio_bridge.polar.fake import (
     Notification,
     fake_client_factory,
 )
-from hri_physio_bridge.polar.gatt import PMD_CONTROL_POINT, PMD_DATA
+from hri_physio_bridge.polar.gatt import HEART_RATE_MEASUREMENT, PMD_CONTROL_POINT, PMD_DATA
 from hri_physio_bridge.polar.output import MemorySink
 from hri_physio_bridge.polar.protocol import Measurement
 from hri_physio_bridge.polar.session import PolarSession
@@ -126,6 +131,35 @@ def test_lost_and_duplicated_frames() -> None:
     assert len(gap) == 1 and gap[0]["missing"] == 146 and gap[0]["stream"] == "ECG"
     assert gap[0]["end"] - gap[0]["start"] == pytest.approx(145 / 130, abs=0.002)
     assert [e["reason"] for e in run.sink.events() if e["event"] == "frame_dropped"] == ["duplicate"]
+
+
+def test_skipped_rr_intervals_are_counted_in_the_status() -> None:
+    clock = FakeClock()
+    device, _ = h10(clock, 20.0)
+    clean = run_session([device], clock, device="0A1B2C3D", streams=["hr", "rr"])
+    clean_stats = clean.session.status()["streams"]
+    clock = FakeClock()
+    device, _ = h10(clock, 20.0)
+    bad = Notification(10.05, HEART_RATE_MEASUREMENT, encode_heart_rate(70, [0, 0]))
+    device.timeline = sorted([*device.timeline, bad], key=lambda n: n.t)
+    run = run_session([device], clock, device="0A1B2C3D", streams=["hr", "rr"])
+    stats = run.session.status()["streams"]
+    assert stats["rr"]["invalid_intervals"] == 2 and clean_stats["rr"]["invalid_intervals"] == 0
+    assert run.sink.values("rr") == clean.sink.values("rr")  # no interval of 0 became a beat
+    assert stats["hr"]["samples"] == clean_stats["hr"]["samples"] + 1
+
+
+def test_timing_counts_cover_every_connection() -> None:
+    clock = FakeClock()
+    device, _ = h10(clock, 30.0, heart_rate=False, lose_ecg_frames=frozenset({5, 6}),
+                    duplicate_ecg_frames=frozenset({10}), disconnect_after=[25])
+    run = run_session([device], clock, device="0A1B2C3D", streams=["ecg"])
+    assert run.session.status()["reconnects"] == 1
+    stats = run.session.status()["streams"]["ecg"]
+    # The gap and the duplicate came on the first connection; the second connection's timer adds to them.
+    counts = (stats["gaps"], stats["missing_samples"], stats["duplicates"], stats["dropped_frames"])
+    assert counts == (1, 146, 1, 1)
+    assert stats["frames"] > 0 and stats["clock_jumps"] == 0
 
 
 def test_disconnect_mid_stream_and_reconnect() -> None:

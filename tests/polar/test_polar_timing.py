@@ -137,14 +137,14 @@ def test_beats_never_after_their_notification() -> None:
     beats.place([NS], arrival_ns=100 * NS)
     late_chain = beats.place([NS], arrival_ns=100 * NS + 700_000_000)  # chain says 101 s: impossible
     assert late_chain == [100 * NS + 700_000_000]
-    assert beats.counts.reanchored == 1
+    assert beats.counts.reanchored_beats == 1
 
 
 def test_beats_reanchor_after_unreported_beats_and_skip_invalid() -> None:
     beats = BeatTimer(max_lag_ns=3 * NS)
     beats.place([NS], 100 * NS)
     assert beats.place([0, NS], 110 * NS) == [110 * NS]
-    assert beats.counts.invalid == 1 and beats.counts.reanchored == 1
+    assert beats.counts.invalid_intervals == 1 and beats.counts.reanchored_beats == 1
 
 
 def test_beat_chain_converges_to_the_tightest_arrival() -> None:

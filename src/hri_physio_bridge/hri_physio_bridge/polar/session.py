@@ -24,7 +24,7 @@ import logging
 import random
 import time
 from collections.abc import Awaitable, Callable
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Any, TypeVar
 
 from hri_physio_bridge.polar import control_point as cp
@@ -64,7 +64,7 @@ from hri_physio_bridge.polar.protocol import (
     decode_heart_rate,
     decode_pmd_frame,
 )
-from hri_physio_bridge.polar.timing import NS, BeatTimer, FrameTimer
+from hri_physio_bridge.polar.timing import NS, BeatTimer, FrameTimer, TimingCounts
 from hri_physio_bridge.rate_limit import RateLimitedLog
 from hri_physio_bridge.waiting import Backoff
 
@@ -121,18 +121,18 @@ class ActiveStream:
 
 @dataclass
 class StreamStats:
-    samples: int = 0
-    frames: int = 0
-    gaps: int = 0
-    missing_samples: int = 0
-    dropped_frames: int = 0
-    clock_jumps: int = 0
-    decode_errors: int = 0
-    out_of_order_samples: int = 0
+    """One stream's counts for the whole session (every connection), as in ``status()["streams"]``."""
+
     rate_hz: float = 0.0
+    samples: int = 0  # pushed to the sink
+    frames: int = 0  # notifications decoded (HR: with a value for this stream)
+    decode_errors: int = 0
+    out_of_order_samples: int = 0  # not after the previous sample: dropped
+    timing: TimingCounts = field(default_factory=TimingCounts)  # written by the stream's timer
 
     def as_dict(self) -> dict[str, Any]:
-        return dict(self.__dict__)
+        counts = {k: v for k, v in asdict(self).items() if k != "timing"}
+        return {**counts, **asdict(self.timing), "dropped_frames": self.timing.dropped_frames}
 
 
 class PolarSession:
@@ -444,7 +444,7 @@ class PolarSession:
             for kind in heart:
                 stream = ActiveStream(kind, rate=kind.nominal_rate or 0.0)
                 if kind.key == "rr":
-                    stream.beats = BeatTimer()
+                    stream.beats = BeatTimer(counts=self._timing_counts(kind, stream.rate))
                 self._hr_streams[kind.key] = stream
                 self._open_output(kind, stream.rate)
         for kind in pmd:
@@ -469,14 +469,14 @@ class PolarSession:
             factors = None
         stream.factor = float(factors[0]) if factors else 1.0
         if kind.measurement == Measurement.PPI:
-            stream.beats = BeatTimer(max_lag_ns=PPI_MAX_LAG_NS)
             stream.rate = 0.0
+            stream.beats = BeatTimer(max_lag_ns=PPI_MAX_LAG_NS, counts=self._timing_counts(kind, stream.rate))
         else:
             reported = stream.selected.get(cp.SettingType.SAMPLE_RATE, 0)
             stream.rate = float(actual_rate(self.family, kind.key, reported))
             if stream.rate <= 0:
                 raise UnsupportedError(f"{kind.label}: the device gave no sample rate")
-            stream.timer = FrameTimer(stream.rate)
+            stream.timer = FrameTimer(stream.rate, counts=self._timing_counts(kind, stream.rate))
         self._active[m] = stream
         self._open_output(kind, stream.rate)
         self.log.info(
@@ -539,6 +539,10 @@ class PolarSession:
         self._opened[kind.key] = stream
         self.stats.setdefault(kind.key, StreamStats(rate_hz=rate))
         self._emit("stream_opened", name=name, rate=rate, channels=len(kind.channels))
+
+    def _timing_counts(self, kind: StreamKind, rate: float) -> TimingCounts:
+        """The counts a new timer of ``kind`` adds to (the session's, across reconnects)."""
+        return self.stats.setdefault(kind.key, StreamStats(rate_hz=rate)).timing
 
     def _open_markers(self) -> None:
         if "markers" in self._opened or self.family is None or self.device_id is None:
@@ -674,7 +678,6 @@ class PolarSession:
         assert stream.timer is not None
         placement = stream.timer.place(frame.timestamp_ns, frame.sample_count, arrival)
         if placement.dropped:
-            stats.dropped_frames += 1
             self._emit(
                 "frame_dropped",
                 marker=True,
@@ -684,7 +687,6 @@ class PolarSession:
             )
             return
         if placement.kind == "clock_jump":
-            stats.clock_jumps += 1
             self._reset_timing()
             for other in self._active.values():
                 if other is not stream and other.timer is not None:
@@ -702,8 +704,6 @@ class PolarSession:
             )
         host = self._mapper.to_host_many(placement.device_ns)
         if placement.kind == "gap":
-            stats.gaps += 1
-            stats.missing_samples += placement.missing
             start, end = (
                 self._mapper.to_host(placement.gap_from_ns),
                 self._mapper.to_host(placement.gap_to_ns),
@@ -736,8 +736,9 @@ class PolarSession:
 
     def _push_ppi(self, stream: ActiveStream, frame: PmdFrame, arrival: int) -> None:
         assert stream.beats is not None
+        # Every interval goes to the timer, which skips and counts those <= 0.
+        stamps = stream.beats.place([row[1] * 1_000_000 for row in frame.samples], arrival - self._latency_ns)
         rows = [row for row in frame.samples if row[1] > 0]
-        stamps = stream.beats.place([row[1] * 1_000_000 for row in rows], arrival - self._latency_ns)
         self._push(
             stream.kind.key, stamps, [[float(r[1]), float(r[2]), float(r[0]), float(r[3])] for r in rows]
         )
@@ -762,8 +763,8 @@ class PolarSession:
         rr_stream = self._hr_streams.get("rr")
         if rr_stream is not None and rr_stream.beats is not None and hr.rr_1024:
             self.stats["rr"].frames += 1
-            valid = [rr for rr in hr.rr_1024 if rr > 0]
-            stamps = rr_stream.beats.place([(rr * NS * 2 + 1024) // 2048 for rr in valid], at)
+            stamps = rr_stream.beats.place([(rr * NS * 2 + 1024) // 2048 for rr in hr.rr_1024], at)
+            valid = [rr for rr in hr.rr_1024 if rr > 0]  # the intervals the timer placed
             self._push("rr", stamps, [[rr * 1000.0 / 1024.0] for rr in valid])
 
     def _push(self, key: str, host_ns: list[int], rows: list[list[float]]) -> None:

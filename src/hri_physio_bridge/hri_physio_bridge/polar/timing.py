@@ -55,21 +55,29 @@ class FramePlacement:
 
 
 @dataclass
-class TimerCounts:
-    frames: int = 0
-    samples: int = 0
-    gaps: int = 0
-    missing_samples: int = 0
-    duplicates: int = 0
-    backward: int = 0
-    short_frames: int = 0
-    clock_jumps: int = 0
+class TimingCounts:
+    """What a stream's timers found and corrected; one per stream, kept across reconnects."""
+
+    gaps: int = 0  # frames that came after lost ones
+    missing_samples: int = 0  # samples estimated lost in those gaps
+    duplicates: int = 0  # frames dropped: the previous frame's device time again
+    backward: int = 0  # frames dropped: before the previous one, or too close after it
+    short_frames: int = 0  # frames closer than their samples' span (times spread evenly)
+    clock_jumps: int = 0  # timing restarted: the device time jumped
+    invalid_intervals: int = 0  # beat intervals <= 0, skipped
+    reanchored_beats: int = 0  # beat chains re-anchored at the notification's arrival
+    clamped_beats: int = 0  # beats moved later to keep beat times increasing
+
+    @property
+    def dropped_frames(self) -> int:
+        return self.duplicates + self.backward
 
 
 class FrameTimer:
     """Per-sample device times for one PMD stream of nominal rate ``rate_hz``."""
 
-    def __init__(self, rate_hz: float, *, jump_tolerance_ns: int = 2 * NS) -> None:
+    def __init__(self, rate_hz: float, *, jump_tolerance_ns: int = 2 * NS,
+                 counts: TimingCounts | None = None) -> None:
         if not rate_hz > 0:
             raise ValueError(f"rate must be > 0 Hz, got {rate_hz}")
         self.rate_hz = rate_hz
@@ -80,7 +88,7 @@ class FrameTimer:
             else (round(NS * 1_000_000 / rate_hz), 1_000_000)
         )
         self.jump_tolerance_ns = jump_tolerance_ns
-        self.counts = TimerCounts()
+        self.counts = counts if counts is not None else TimingCounts()
         self._last_t: int | None = None
         self._last_arrival: int | None = None
 
@@ -136,17 +144,7 @@ class FrameTimer:
     def _accept(self, placement: FramePlacement, timestamp_ns: int, arrival_ns: int) -> FramePlacement:
         self._last_t = timestamp_ns
         self._last_arrival = arrival_ns
-        self.counts.frames += 1
-        self.counts.samples += len(placement.device_ns)
         return placement
-
-
-@dataclass
-class BeatCounts:
-    beats: int = 0
-    reanchored: int = 0
-    clamped: int = 0
-    invalid: int = 0
 
 
 class BeatTimer:
@@ -156,10 +154,11 @@ class BeatTimer:
     thought broken (beats not reported) and re-anchored at the arrival.
     """
 
-    def __init__(self, *, max_lag_ns: int = 3 * NS, min_step_ns: int = 1_000_000) -> None:
+    def __init__(self, *, max_lag_ns: int = 3 * NS, min_step_ns: int = 1_000_000,
+                 counts: TimingCounts | None = None) -> None:
         self.max_lag_ns = max_lag_ns
         self.min_step_ns = min_step_ns
-        self.counts = BeatCounts()
+        self.counts = counts if counts is not None else TimingCounts()
         self._last: int | None = None
 
     def reset(self) -> None:
@@ -168,7 +167,7 @@ class BeatTimer:
     def place(self, intervals_ns: list[int], arrival_ns: int) -> list[int]:
         """One end time per interval (oldest first); intervals <= 0 are skipped and counted."""
         valid = [i for i in intervals_ns if i > 0]
-        self.counts.invalid += len(intervals_ns) - len(valid)
+        self.counts.invalid_intervals += len(intervals_ns) - len(valid)
         if not valid:
             return []
         anchored = [arrival_ns - sum(valid[k + 1 :]) for k in range(len(valid))]
@@ -180,7 +179,7 @@ class BeatTimer:
                 t += interval
                 chained.append(t)
             if chained[-1] > arrival_ns or chained[-1] < arrival_ns - self.max_lag_ns:
-                self.counts.reanchored += 1
+                self.counts.reanchored_beats += 1
                 times = anchored
             else:
                 times = chained
@@ -188,9 +187,8 @@ class BeatTimer:
         for t in times:
             if previous is not None and t < previous + self.min_step_ns:
                 t = previous + self.min_step_ns
-                self.counts.clamped += 1
+                self.counts.clamped_beats += 1
             out.append(t)
             previous = t
         self._last = out[-1]
-        self.counts.beats += len(out)
         return out
