@@ -39,11 +39,14 @@ class MemorySource(Streamer):
         self.available.set()
         self.opens = 0
         self.exhausted = False
+        self.open_errors: list[Exception] = []  # raised by the next opens, in turn
 
     def open_input(self, expected: StreamSpec | None = None, timeout: float = 10.0,
                    stop: threading.Event | None = None) -> StreamSpec:
         if not self.available.wait(timeout):
             raise StreamNotFoundError("memory source not available")
+        if self.open_errors:
+            raise self.open_errors.pop(0)
         self.opens += 1
         return self._spec
 
@@ -213,6 +216,23 @@ def test_lost_source_reconnects_and_keeps_data() -> None:
     got = np.concatenate([f.values[:, 0] for f in sink.frames])
     np.testing.assert_array_equal(got, np.r_[0:8, 20:28])
     assert [g.count for g in rx.stats.gaps] == [12]
+
+
+def test_a_source_lost_again_while_reopening_is_waited_for() -> None:
+    """LSL may still list an outlet that has just closed: opening it fails as lost, and the next try works."""
+    rx, src, sink = make()
+    rx.start()  # opens the source (it is there)
+    assert src.opens == 1
+    src.open_errors = [StreamLostError("could not open: the stream has been lost")] * 2
+    src.chunks.put(chunk(0, 8))
+    src.chunks.put(StreamLostError("memory stream lost"))
+    src.chunks.put(chunk(20, 8))
+    src.chunks.put(None)
+    assert rx.wait(10.0)
+    rx.stop()
+    assert rx.fatal is None and rx.stats.reconnects == 1 and not src.open_errors
+    got = np.concatenate([f.values[:, 0] for f in sink.frames])
+    np.testing.assert_array_equal(got, np.r_[0:8, 20:28])
 
 
 def test_lost_source_without_reconnect_is_fatal_but_flushes(caplog: pytest.LogCaptureFixture) -> None:

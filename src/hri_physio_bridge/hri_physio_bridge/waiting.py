@@ -14,7 +14,13 @@ import time
 from collections.abc import Callable
 
 from hri_physio_bridge.rate_limit import RateLimitedLog
-from hri_physio_bridge.streamers.base import OpenCancelled, Streamer, StreamNotFoundError, StreamSpec
+from hri_physio_bridge.streamers.base import (
+    OpenCancelled,
+    Streamer,
+    StreamLostError,
+    StreamNotFoundError,
+    StreamSpec,
+)
 
 Clock = Callable[[], float]
 #: Sleeps up to the given seconds; returns True when the wait should end early (a stop).
@@ -125,8 +131,9 @@ class StreamOpener:
 
     Each attempt waits up to ``timeout`` s inside the streamer. With ``retry``, attempts are
     separated by a :class:`Backoff` delay and "still waiting" is logged at most every
-    ``log_period`` s. Only :class:`StreamNotFoundError` is retried: a source that cannot exist
-    (a missing file, a bad address) is raised at once. A stop raises :class:`OpenCancelled`.
+    ``log_period`` s. Only :class:`StreamNotFoundError` and :class:`StreamLostError` are retried:
+    a source that cannot exist (a missing file, a bad address) is raised at once. A stop raises
+    :class:`OpenCancelled`.
     """
 
     def __init__(
@@ -160,7 +167,9 @@ class StreamOpener:
                 return self.streamer.open_input(self.expected, timeout=self.timeout, stop=self.stop)
             except OpenCancelled:
                 raise
-            except StreamNotFoundError as exc:
+            except (StreamNotFoundError, StreamLostError) as exc:
+                # Absent, or gone again while opening (LSL may list an outlet for a moment after it
+                # closed): both can change, so a retrying opener tries again.
                 if not self.retry:
                     raise
                 self._waiting.report("absent", f"{exc}; still waiting", "attempt(s)")
