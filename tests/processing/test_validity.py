@@ -115,6 +115,20 @@ def test_gap_restarts_windows_and_is_reported(mitdb) -> None:
     np.testing.assert_array_equal(clean_t, t)
 
 
+def test_each_discontinuity_report_counts_what_came_since_the_last(mitdb) -> None:
+    n = 90 * FS
+    keep = np.ones(n, dtype=bool)
+    keep[30 * FS : 32 * FS] = False  # 2 s lost
+    keep[60 * FS : 61 * FS] = False  # then 1 s, long after the first report
+    t, x = (np.arange(n) / FS)[keep], mitdb.x[:n][keep]
+    proc, out = _run(x, t)
+    first, second = statuses(out, "discontinuity")
+    assert (first["gaps"], first["missing_samples"]) == (1, 2 * FS)
+    assert (second["gaps"], second["missing_samples"]) == (1, FS)
+    assert first["t"] == pytest.approx(32.0) and second["t_first"] == pytest.approx(60.0 - 1 / FS)
+    assert (proc.stats.gaps, proc.stats.missing_samples) == (2, 3 * FS)  # the totals
+
+
 def test_backward_clock_jump_restarts_windows_but_is_not_a_gap(mitdb) -> None:
     n = 70 * FS
     t = np.arange(n) / FS

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import bisect
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -87,7 +87,8 @@ class ProcessorStats:
     published_peaks: int = 0
     duplicate_peaks: int = 0
     gaps: int = 0
-    clock_jumps: int = 0
+    missing_samples: int = 0  # estimated, in the gaps
+    clock_jumps: int = 0  # duplicate or backward time steps
     discarded_samples: int = 0
     samples_in: int = 0
 
@@ -97,18 +98,13 @@ class ProcessorStats:
 
 @dataclass
 class _Pending:
-    """Gaps and discarded samples not yet reported (reported at most once per hop)."""
+    """Discontinuities not yet reported (reported at most once per hop): the totals at the last
+    report, and when the first and last unreported ones happened."""
 
-    gaps: int = 0
-    missing_samples: int = 0
-    backward_steps: int = 0
-    discarded: int = 0
+    reported: ProcessorStats
     t_first: float = math.nan
     t_last: float = math.nan
     examples: list[str] = field(default_factory=list)
-
-    def empty(self) -> bool:
-        return self.gaps == 0 and self.backward_steps == 0 and self.discarded == 0
 
 
 class NeurokitProcessor:
@@ -133,7 +129,7 @@ class NeurokitProcessor:
         self.stats = ProcessorStats()
         self._boundary: float | None = None  # last published sample time (this segment)
         self._last_peak: float | None = None  # last published peak time (this segment)
-        self._pending = _Pending()
+        self._pending = _Pending(replace(self.stats))
         self._last_event_t: float | None = None
         # The last window of the segment if it kept an unpublished tail (it was not final).
         self._open: _View | None = None
@@ -173,7 +169,6 @@ class NeurokitProcessor:
                 out.extend(self._cut(ev))
             elif isinstance(ev, Discarded):
                 self.stats.discarded_samples += ev.samples
-                self._pending.discarded += ev.samples
                 self._note(self._pending, ev.t_start, ev.t_end,
                            f"{ev.samples} sample(s) {ev.t_start:.6f}..{ev.t_end:.6f}")
                 out.extend(self._maybe_report(ev.t_end))
@@ -186,12 +181,10 @@ class NeurokitProcessor:
         t_before, t_after = float(ev.t_before), float(ev.t_after)
         if isinstance(ev, Gap):
             self.stats.gaps += 1
-            p.gaps += 1
-            p.missing_samples += ev.count
+            self.stats.missing_samples += ev.count
             kind = "gap"
         else:
             self.stats.clock_jumps += 1
-            p.backward_steps += 1
             kind = "backward"
         self._note(p, t_before, t_after,
                    f"{kind} {t_before:.6f} -> {t_after:.6f} ({t_after - t_before:+.4g} s)")
@@ -215,33 +208,36 @@ class NeurokitProcessor:
         return self._report_pending()
 
     def _report_pending(self) -> list[Output]:
-        p = self._pending
-        if p.empty():
+        p, now = self._pending, self.stats
+        gaps, missing = now.gaps - p.reported.gaps, now.missing_samples - p.reported.missing_samples
+        backward = now.clock_jumps - p.reported.clock_jumps
+        discarded = now.discarded_samples - p.reported.discarded_samples
+        if not (gaps or backward or discarded):
             return []
         self._last_event_t = p.t_last
         reasons = []
-        cuts = p.gaps + p.backward_steps
+        cuts = gaps + backward
         if cuts:
             reasons.append(
                 f"{cuts} timestamp discontinuit{'y' if cuts == 1 else 'ies'} "
-                f"({p.gaps} gap(s), about {p.missing_samples} missing sample(s); {p.backward_steps} "
+                f"({gaps} gap(s), about {missing} missing sample(s); {backward} "
                 "duplicate or backward step(s)); windows restart after each"
             )
-        if p.discarded:
+        if discarded:
             reasons.append(
-                f"{p.discarded} sample(s) not processed: their stretch between discontinuities is shorter "
+                f"{discarded} sample(s) not processed: their stretch between discontinuities is shorter "
                 f"than min_window_seconds ({self.cfg.min_window_seconds:g} s)"
             )
-        if cuts >= 10 and p.discarded:
+        if cuts >= 10 and discarded:
             reasons.append("timestamps keep jumping: is sampling_rate "
                            f"({self.fs:g} Hz) right for this stream?")
         payload = {
             "t": p.t_last, "event": "discontinuity", "mode": self.cfg.mode, "ok": False,
-            "gaps": p.gaps, "missing_samples": p.missing_samples, "backward_steps": p.backward_steps,
-            "discarded_samples": p.discarded, "t_first": p.t_first, "t_last": p.t_last,
+            "gaps": gaps, "missing_samples": missing, "backward_steps": backward,
+            "discarded_samples": discarded, "t_first": p.t_first, "t_last": p.t_last,
             "examples": p.examples, "reason": "; ".join(reasons),
         }
-        self._pending = _Pending()
+        self._pending = _Pending(replace(now))
         return [StatusOutput(payload)]
 
     # -- one window ------------------------------------------------------------
