@@ -48,6 +48,8 @@ from hri_physio_coach.routine import RoutineError
 PROG = COACH_NODE
 HR_CHANNELS = ("hr", "bpm", "heart_rate")
 FLAG_CHANNEL = "flag"
+#: The name the graph gives an endpoint whose node it does not know (yet, or any more): rmw_dds_common's.
+UNKNOWN_NODE_NAME = "_NODE_NAME_UNKNOWN_"
 START_WORDS, STOP_WORDS = ("start",), ("stop", "exit")
 # Events worth a line in the ROS log (all of them go to /coach/events).
 _LOGGED = {"session_start", "phase", "activity", "calibration", "zone", "rule_update", "hr_lost",
@@ -208,7 +210,8 @@ class QtPhysioCoachNode(ManagedNode):
             self._coach_nodes[gid] = self._coach_node_of(gid)
         node = self._coach_nodes[gid]
         if node is not None:
-            self._conflict(SECOND_COACH, self.config.command_topic, f"coach node {node} sends robot commands")
+            self._conflict(SECOND_COACH, self.config.command_topic, f"coach node {node} sends robot commands",
+                           seen=node)
 
     def _coach_node_of(self, gid: bytes) -> str | None:
         """The name of the node behind a command publisher if it is a coach (None: it is not, or unknown)."""
@@ -230,17 +233,26 @@ class QtPhysioCoachNode(ManagedNode):
         if gid is not None and self._clocks.seen(gid):
             self._conflict(SECOND_CLOCK, CLOCK_TOPIC, "two publishers take turns on the clock")
 
-    def _conflict(self, kind: str, topic: str, what: str) -> None:
-        """Say so (event and error log) and stop: a session mixed with another is worth nothing."""
+    def _conflict(self, kind: str, topic: str, what: str, seen: str | None = None) -> None:
+        """Say so (event and error log) and stop: a session mixed with another is worth nothing.
+
+        ``seen``: the other node as identified when the conflict was found; it is named even if graph
+        discovery no longer (or not yet) lists it by name.
+        """
         with self._lock:
             if self.conflict is not None:
                 return
             me = self.get_fully_qualified_name()
-            others = sorted(f"{i.node_namespace.rstrip('/')}/{i.node_name}"
-                            for i in self.get_publishers_info_by_topic(topic))
+            infos = self.get_publishers_info_by_topic(topic)
+            others = sorted(f"{i.node_namespace.rstrip('/')}/{i.node_name}" for i in infos)
             if me in others:
                 others.remove(me)  # one of them is this node's own publisher (same-named nodes stay)
-            reason = (f"{what} ({topic}; other publishers: {', '.join(others) or 'already gone'}): "
+            unnamed = [n for n in others if n.endswith(UNKNOWN_NODE_NAME)]
+            others = [n for n in others if n not in unnamed]
+            if seen is not None and seen not in others:
+                others.append(seen)
+            who = ", ".join(others) or ("not known by name yet" if unnamed else "already gone")
+            reason = (f"{what} ({topic}; other publishers: {who}): "
                       "another session shares this ROS domain; stopping")
             self.conflict = {"conflict": kind, "topic": topic, "publishers": others, "reason": reason}
             self._on_event({"t": self._now(), "event": "conflict", "participant": self.coach.participant,
