@@ -444,7 +444,7 @@ class PolarSession:
             for kind in heart:
                 stream = ActiveStream(kind, rate=kind.nominal_rate or 0.0)
                 if kind.key == "rr":
-                    stream.beats = BeatTimer(counts=self._timing_counts(kind, stream.rate))
+                    stream.beats = BeatTimer(counts=self._stream_stats(kind, stream.rate).timing)
                 self._hr_streams[kind.key] = stream
                 self._open_output(kind, stream.rate)
         for kind in pmd:
@@ -470,13 +470,14 @@ class PolarSession:
         stream.factor = float(factors[0]) if factors else 1.0
         if kind.measurement == Measurement.PPI:
             stream.rate = 0.0
-            stream.beats = BeatTimer(max_lag_ns=PPI_MAX_LAG_NS, counts=self._timing_counts(kind, stream.rate))
+            counts = self._stream_stats(kind, stream.rate).timing
+            stream.beats = BeatTimer(max_lag_ns=PPI_MAX_LAG_NS, counts=counts)
         else:
             reported = stream.selected.get(cp.SettingType.SAMPLE_RATE, 0)
             stream.rate = float(actual_rate(self.family, kind.key, reported))
             if stream.rate <= 0:
                 raise UnsupportedError(f"{kind.label}: the device gave no sample rate")
-            stream.timer = FrameTimer(stream.rate, counts=self._timing_counts(kind, stream.rate))
+            stream.timer = FrameTimer(stream.rate, counts=self._stream_stats(kind, stream.rate).timing)
         self._active[m] = stream
         self._open_output(kind, stream.rate)
         self.log.info(
@@ -537,12 +538,12 @@ class PolarSession:
         )
         self.sink.open(stream)
         self._opened[kind.key] = stream
-        self.stats.setdefault(kind.key, StreamStats(rate_hz=rate))
+        self._stream_stats(kind, rate)
         self._emit("stream_opened", name=name, rate=rate, channels=len(kind.channels))
 
-    def _timing_counts(self, kind: StreamKind, rate: float) -> TimingCounts:
-        """The counts a new timer of ``kind`` adds to (the session's, across reconnects)."""
-        return self.stats.setdefault(kind.key, StreamStats(rate_hz=rate)).timing
+    def _stream_stats(self, kind: StreamKind, rate: float) -> StreamStats:
+        """The session's counts for ``kind`` (created at its first connection, kept across reconnects)."""
+        return self.stats.setdefault(kind.key, StreamStats(rate_hz=rate))
 
     def _open_markers(self) -> None:
         if "markers" in self._opened or self.family is None or self.device_id is None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import re
 from dataclasses import dataclass, field
@@ -10,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from hri_physio_bridge import topics
-from hri_physio_bridge.json_files import json_safe, strict_json, write_text_atomic
+from hri_physio_bridge.json_files import json_safe, write_text_atomic
 from hri_physio_coach.report import figures as plots
 from hri_physio_coach.report import metrics, page
 from hri_physio_coach.report.bagdata import BagTables, ReportError, read_bag
@@ -171,8 +172,8 @@ def make_report(path: Path | str, out: Path | str | None = None, hr_topic: str |
         "figures": {k: p.name for k, p in files.items()},
     }
     json_path = out_dir / REPORT_JSON
-    report = json_safe(report)
-    write_text_atomic(json_path, strict_json(report, indent=2, ensure_ascii=False) + "\n")
+    report = json_safe(report)  # the page is rendered from the same safe values
+    write_text_atomic(json_path, json.dumps(report, indent=2, ensure_ascii=False, allow_nan=False) + "\n")
     html_path = out_dir / REPORT_HTML
     write_text_atomic(html_path, page.render(report, files, where.configs))
     files["report_json"] = json_path
