@@ -4,8 +4,11 @@ and the simulated participant following the tempo the audio streamer reports as 
 from __future__ import annotations
 
 import json
+import math
 import signal
 import threading
+import time
+from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -60,6 +63,21 @@ def playing(status: dict, source: str) -> bool:
     return status.get("state") == "playing" and status.get("source") == source
 
 
+def resending_until_received(probe: Probe, kind: str, line: str) -> Callable[[], bool]:
+    """A wait predicate: true once the streamer received a request; sends ``line`` each second till then."""
+    sent_at = [-math.inf]
+
+    def received() -> bool:
+        status = probe.last(kind)
+        if status and status["requests"]["received"] >= 1:
+            return True
+        if time.monotonic() - sent_at[0] >= 1.0:
+            probe.send(line)
+            sent_at[0] = time.monotonic()
+        return False
+    return received
+
+
 def test_set_audio_and_video_reach_the_streamers_and_the_participant_hears_what_plays(
         ros_context: Any, lsl_name: str) -> None:
     probe = Probe(ros_context)
@@ -77,6 +95,11 @@ def test_set_audio_and_video_reach_the_streamers_and_the_participant_hears_what_
                        and probe.node.count_publishers(topics.AUDIO_REQUEST) >= 1
                        and probe.last("audio") and probe.last("video") and probe.last("participant"), 60,
                        lambda: "\n".join(p.output for p in (controller, audio, video, person)))
+            # Warm-up: a request that reached each streamer shows that every writer on the way has
+            # matched its reader (the graph counts above can come first; a line sent before is lost).
+            for kind, line in (("audio", "set audio relaxing"), ("video", "set video splash")):
+                wait_until(resending_until_received(probe, kind, line), 60,
+                           lambda kind=kind: f"a warm-up request at the {kind} streamer: {probe.last(kind)}")
             probe.send("set audio beat:125")
             probe.send("set video marching")
             wait_until(lambda: playing(probe.last("audio"), "beat:125"), 60,
