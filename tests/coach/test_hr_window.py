@@ -82,3 +82,16 @@ def test_invalid_and_flagged_samples_are_counted_in_their_window() -> None:
     stats = monitor.take(0.0, 3.5)
     assert (stats.n_valid, stats.n_invalid, stats.n_flagged) == (1, 1, 1)
     assert monitor.stats().n_valid == 1  # the 4-s sample stays for the next window
+
+
+def test_the_calibration_holds_the_heart_rate_taken_in_it_whenever_it_arrives() -> None:
+    monitor = HeartRateMonitor()
+    fed(monitor, [(k - 9.5, 0.05, 120.0) for k in range(8)])  # the strap streamed before the session
+    monitor.start_calibration()
+    monitor.add(0.2, 120.0, source_t=-0.5 + AHEAD)  # taken before the session start, arrives after it
+    # 1 Hz from 0.5 s, delivered 0.05 s later, except the ones taken in [170, 177): 2 s late.
+    samples = [(k + 0.5, 2.0 if 170 <= k + 0.5 < 177 else 0.05, 60.0 + k % 2) for k in range(180)]
+    fed(monitor, samples)
+    kept = monitor.finish_calibration(0.0, 177.0)
+    assert len(kept) == 177 and sum(kept) / len(kept) == pytest.approx(60.0 + 88 / 177)
+    assert monitor.finish_calibration() == []  # finished: collected no more

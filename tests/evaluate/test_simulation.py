@@ -88,6 +88,7 @@ def test_out_of_reach_is_said_once_and_the_hardest_setting_kept() -> None:
 def test_the_thesis_policies_run_the_routine_as_written(policy: str) -> None:
     run = simulate_session(SessionSpec(policy, 0, TYPICAL, 1, 2))
     assert not run.of("activity_choice") and not run.of("plan") and not run.of("zone_out_of_reach")
-    marching = (run.t >= 481) & (run.t < 540)  # the conditioning's first slot: marching
+    # The conditioning's first slot, 480-540 s: marching, taken up on the person's next mark (485 s).
+    marching = (run.t >= 486) & (run.t < 545)
     assert {a for a, m in zip(run.activity, marching, strict=True) if m} == {"marching"}
     assert run.of("session_end")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import numpy as np
 import pytest
 
 from hri_physio_coach.config import CoachConfig
@@ -67,9 +68,11 @@ def test_a_wait_is_bounded_by_hr_wait(prompt: SessionRun) -> None:
     assert rule(run, INSIDE)["inputs"]["n_valid"] < 30
 
 
-def test_commands_reach_the_participant_late_and_music_later_still(prompt: SessionRun) -> None:
-    """The warm-up starts at 180 s: marching to the music's tempo."""
-    run = simulate_session(replace(SPEC, command_latency=2.0, tempo_latency=1.5), coach())
+def test_commands_reach_the_participant_late_and_music_later_still() -> None:
+    """The warm-up starts at 180 s: marching to the music's tempo (a person who reacts at once)."""
+    at_once = replace(SPEC, params=replace(SPEC.params, reaction_period=0.0))
+    prompt = simulate_session(at_once, coach())
+    run = simulate_session(replace(at_once, command_latency=2.0, tempo_latency=1.5), coach())
 
     def doing(r: SessionRun, t: float) -> str:
         return r.activity[list(r.t).index(t)]
@@ -78,6 +81,15 @@ def test_commands_reach_the_participant_late_and_music_later_still(prompt: Sessi
     # Sent at 180 s, seen at 182 s: the sample of 181 s (which arrives at 181.1 s) was still taken at rest.
     assert doing(run, 181.0) == "base" and doing(run, 182.0) == "marching"
     assert run.model_hr[list(run.t).index(200.0)] < prompt.model_hr[list(prompt.t).index(200.0)]
+
+
+def test_a_person_takes_an_instruction_up_on_the_next_mark(prompt: SessionRun) -> None:
+    """Marching is asked for at 180 s and taken up at 185 s (``reaction_period`` 5 s), late or not."""
+    run = simulate_session(replace(SPEC, command_latency=2.0), coach())
+    for r in (prompt, run):
+        assert r.activity[list(r.t).index(184.0)] == "base"
+        assert r.activity[list(r.t).index(186.0)] == "marching"
+    assert np.array_equal(prompt.model_hr, run.model_hr)
 
 
 def test_the_model_can_start_after_the_session(prompt: SessionRun) -> None:

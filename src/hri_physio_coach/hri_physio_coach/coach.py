@@ -116,6 +116,15 @@ def load_coach_routine(config: CoachConfig) -> Routine:
     return load_routine(path, routine_variables(config))
 
 
+def session_start_time(now: float) -> float:
+    """When a session asked to start at ``now`` starts: the next whole second of the coach's clock.
+
+    Every scheduled time (activity starts, rule updates) is then a whole second: readable in the
+    logs, and a simulated strap's half-second samples keep clear of the windows' edges.
+    """
+    return float(math.ceil(now - 1e-6))
+
+
 class ExerciseCoach(Listener):
     """Runs the exercise session: feed it HR samples and command replies, tick it with time."""
 
@@ -140,6 +149,7 @@ class ExerciseCoach(Listener):
         self.zone: HeartRateZone | None = None
         self.hr_rest_source: str | None = None
         self._calibrated_in_phase = False
+        self._calibration_start = 0.0
         self._gesture: tuple[str, bool] | None = None  # (name, follows the ladder)
         # An exercise gesture is played again each time it ends, until its activity ends.
         self._gesture_durations = shipped_gesture_durations() if config.gesture_repeat else {}
@@ -387,6 +397,7 @@ class ExerciseCoach(Listener):
     def on_phase_start(self, phase: Phase, t: float) -> None:
         if phase.kind == CALIBRATION:
             self._calibrated_in_phase = False
+            self._calibration_start = t
             self.monitor.start_calibration()
             return
         if self.zone is None:
@@ -421,12 +432,20 @@ class ExerciseCoach(Listener):
         self._calibrate(ctx.t)
 
     def _calibrate(self, t: float) -> None:
-        samples = self.monitor.finish_calibration()
+        """HR_rest: the mean of the valid heart rate taken from ``calib_settle`` after the phase start (the
+        person has just sat down) until ``hr_wait`` before ``t`` (so every sample it averages has had
+        ``hr_wait`` to arrive and a slow transport does not change it); at most a quarter of the phase
+        is left out at the start and a tenth at the end."""
+        duration = max(t - self._calibration_start, 0.0)
+        start = self._calibration_start + min(self.cfg.calib_settle, 0.25 * duration)
+        end = t - min(self.cfg.hr_wait, 0.1 * duration)
+        samples = self.monitor.finish_calibration(start, end)
         self._calibrated_in_phase = True
         if len(samples) >= self.cfg.calib_min_samples:
             hr_rest = sum(samples) / len(samples)
             if hr_rest < self.hr_max:
-                self._set_zone(hr_rest, "measured", "mean HR over calibration", len(samples), t)
+                self._set_zone(hr_rest, "measured", "mean HR over calibration", len(samples), t,
+                               window=(start, end))
                 return
             reason = f"measured HR_rest {hr_rest:.1f} is not below HR_max {self.hr_max:.1f}"
         else:
@@ -434,11 +453,12 @@ class ExerciseCoach(Listener):
                       f"{self.cfg.calib_min_samples}")
         self._set_zone(self.cfg.resting_default, "default", reason, len(samples), t)
 
-    def _set_zone(self, hr_rest: float, source: str, reason: str, n: int, t: float) -> None:
+    def _set_zone(self, hr_rest: float, source: str, reason: str, n: int, t: float,
+                  window: tuple[float, float] | None = None) -> None:
         self.zone = HeartRateZone(hr_rest, self.hr_max, self.cfg.zone_low, self.cfg.zone_high)
         self.hr_rest_source = source
         self._emit({"t": t, "event": "calibration", "hr_rest": hr_rest, "source": source, "reason": reason,
-                    "n_samples": n, "age": self.cfg.part_age})
+                    "n_samples": n, "window": list(window) if window else None, "age": self.cfg.part_age})
         self._emit({"t": t, "event": "zone", **self.zone.as_dict()})
         self.say(self.cfg.speech_zone.format_map(self._variables()), "zone announcement")
 

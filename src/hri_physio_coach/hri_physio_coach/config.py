@@ -55,6 +55,9 @@ class CoachConfig(NodeConfig):
                                    "command topic)")
     # --- calibration ---------------------------------------------------------------------------
     calib_time: float = option(180.0, "seated calibration of HR_rest", unit="s", gt=0)
+    calib_settle: float = option(15.0, "first seconds of the calibration left out of HR_rest (the "
+                                 "participant has just sat down; at most a quarter of the phase)",
+                                 unit="s", ge=0)
     calib_skip: bool = option(False, "skip the calibration phase and use resting_default")
     resting_default: float = option(61.0, "HR_rest when calibration is skipped or has too few samples",
                                     unit="bpm", ge=20, le=150)

@@ -63,7 +63,7 @@ class HeartRateMonitor:
         self.recent_window = recent_window
         self._window: deque[tuple[float, str, float]] = deque(maxlen=maxlen)  # (taken, kind, bpm)
         self._recent: deque[tuple[float, float]] = deque()
-        self._calibration: list[float] | None = None
+        self._calibration: list[tuple[float, float]] | None = None  # (taken, bpm) of valid samples
         self.clock_offset: float | None = None  # source clock minus coach clock (fastest sample)
         self.newest_sample: float | None = None  # when the newest sample was taken (coach clock)
         self._intervals: deque[float] = deque(maxlen=INTERVALS_KEPT)
@@ -107,7 +107,7 @@ class HeartRateMonitor:
         self.last_hr = hr
         self._recent.append((receipt_time, hr))
         if self._calibration is not None:
-            self._calibration.append(hr)
+            self._calibration.append((taken, hr))
         return True
 
     @property
@@ -186,6 +186,8 @@ class HeartRateMonitor:
     def start_calibration(self) -> None:
         self._calibration = []
 
-    def finish_calibration(self) -> list[float]:
+    def finish_calibration(self, start: float = -math.inf, end: float = math.inf) -> list[float]:
+        """The valid samples taken in ``[start, end)`` since :meth:`start_calibration` (by when taken,
+        as a rule update's window: a sample that arrives late still counts, one taken before does not)."""
         samples, self._calibration = self._calibration or [], None
-        return samples
+        return [hr for taken, hr in samples if start <= taken < end]

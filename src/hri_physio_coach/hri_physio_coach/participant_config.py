@@ -46,6 +46,9 @@ class ParticipantNodeConfig(NodeConfig):
     sdnn_rest: float = option(_P.sdnn_rest, "SD of RR intervals at rest", unit="s", ge=0)
     artefact_rate: float = option(_P.artefact_rate, "missed or extra beats in the reported RR (fraction)",
                                   ge=0, le=1)
+    reaction_period: float = option(_P.reaction_period, "a new instruction is taken up at the next multiple "
+                                    "of this period from the coach's session start (0: at once)", unit="s",
+                                    ge=0)
     # --- the node and the simulated strap ------------------------------------------------------
     seed: int = option(0, "seed of the participant's variability")
     device_id: str = option("SIM0001", "Polar device id in the LSL stream names PolarH10/<id>/<ECG|HR|RR>",

@@ -5,7 +5,8 @@ and ``simulated_participant`` (a :class:`~hri_physio_coach.participant.cardiac.P
 that follows the robot's command lines through a
 :class:`~hri_physio_coach.participant.perception.RobotObserver`), joined by ROS 2 and LSL.
 Here the same three objects are joined directly: every command line the coach sends goes to
-the observer, every 1 Hz heart rate the strap reports reaches the coach ``hr_latency``
+the observer (the person takes a change up on the next mark of ``reaction_period``, as the node's
+participant does), every 1 Hz heart rate the strap reports reaches the coach ``hr_latency``
 seconds later, and time jumps from one due thing (a coach timer, a heart-rate sample) to the
 next. No second implementation: only the transport is left out.
 
@@ -29,7 +30,7 @@ import numpy as np
 from hri_physio_coach.coach import ExerciseCoach, load_coach_routine
 from hri_physio_coach.config import CoachConfig
 from hri_physio_coach.participant.perception import RobotObserver
-from hri_physio_coach.participant.physiology import ParticipantParams
+from hri_physio_coach.participant.physiology import ParticipantParams, takes_effect
 from hri_physio_coach.participant.stream import session_model
 from hri_physio_coach.routine import Routine
 from qt_controller.commands import ParseError, SetAudio, parse_command
@@ -118,8 +119,8 @@ def simulate_session(spec: SessionSpec, base: CoachConfig | None = None) -> Sess
     sent = itertools.count()
 
     def see(line: str) -> None:
-        if observer.observe(line):
-            sim.set_activity(observer.activity)
+        if observer.observe(line):  # taken up on the person's next mark from the session start (0)
+            sim.set_activity(observer.activity, takes_effect(clock[0], 0.0, spec.params.reaction_period))
 
     def send(line: str) -> None:
         delay = spec.command_latency + (spec.tempo_latency if _is_audio(line) else 0.0)
@@ -164,7 +165,7 @@ def simulate_session(spec: SessionSpec, base: CoachConfig | None = None) -> Sess
             ladder.append(coach.ladder.index)
             doing = coach.choice.current
             mets.append(doing.mets if doing is not None and doing.mets is not None else np.nan)
-            acts.append(observer.activity.name)
+            acts.append(sim.activity.name)
         coach.tick(now)
     return SessionRun(
         spec=spec, events=events, decisions=[d.as_dict() for d in coach.decisions],

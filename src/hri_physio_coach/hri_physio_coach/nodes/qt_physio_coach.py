@@ -39,7 +39,7 @@ from hri_physio_bridge.node_runner import ManagedNode, run_node
 from hri_physio_bridge.qos import command_qos, event_qos, frame_qos, latched_qos
 from hri_physio_bridge.rate_limit import RateLimitedLog
 from hri_physio_bridge.ros_frames import msg_to_frame
-from hri_physio_coach.coach import CoachError, ExerciseCoach
+from hri_physio_coach.coach import CoachError, ExerciseCoach, session_start_time
 from hri_physio_coach.config import COACH_NODE, CoachNodeConfig
 from hri_physio_coach.conflicts import SECOND_CLOCK, SECOND_COACH, EchoFilter, SourceWatch
 from hri_physio_coach.paths import default_config_file
@@ -87,6 +87,7 @@ class QtPhysioCoachNode(ManagedNode):
         self._lock = threading.RLock()
         self._wake = threading.Event()
         self._start_requested = False
+        self._start_at: float | None = None  # the whole second the session starts at
         self._stop_reason: str | None = None
         self._state_dirty = True
         self.conflict: dict[str, Any] | None = None
@@ -268,7 +269,10 @@ class QtPhysioCoachNode(ManagedNode):
             coach = self.coach
             if now > 0.0 and not self.finished:  # sim time without /clock yet: wait
                 if not coach.started and (self._start_requested or not self.config.interactive):
-                    coach.start(now)
+                    if self._start_at is None:
+                        self._start_at = session_start_time(now)
+                    if now >= self._start_at:
+                        coach.start(self._start_at)
                 if coach.started:
                     coach.tick(now)
                 if coach.finished:

@@ -36,7 +36,8 @@ from hri_physio_bridge.qos import command_qos, event_qos
 from hri_physio_bridge.streamers.base import StreamerError, StreamSpec
 from hri_physio_bridge.streamers.lsl import LslStreamer
 from hri_physio_coach.participant.perception import RobotObserver
-from hri_physio_coach.participant.stream import StrapStream
+from hri_physio_coach.participant.physiology import takes_effect
+from hri_physio_coach.participant.stream import StrapStream, strap_start
 from hri_physio_coach.participant_config import PARTICIPANT_NODE, ParticipantNodeConfig
 
 PROG = PARTICIPANT_NODE
@@ -53,7 +54,7 @@ class SimulatedParticipantNode(ManagedNode):
         # 0 until the first /clock message, and starting then would make the first step jump
         # from 0 to the clock's epoch.
         self.strap: StrapStream | None = None
-        self._session_start: float | None = None  # heard before the streams started
+        self._session_start: float | None = None  # the coach's session_start (the first one heard)
         self.lsl_offset = 0.0
         self.observer = RobotObserver()
         self._lock = threading.Lock()  # ticks (executor thread) and close (main thread)
@@ -85,7 +86,7 @@ class SimulatedParticipantNode(ManagedNode):
 
     def _start_model(self, now: float) -> StrapStream:
         cfg = self.config
-        self.strap = StrapStream(self.params, cfg.seed, now, ecg_rate=cfg.ecg_rate)
+        self.strap = StrapStream(self.params, cfg.seed, strap_start(now), ecg_rate=cfg.ecg_rate)
         self.strap.set_activity(self.observer.activity)
         if self._session_start is not None:
             self.strap.start_session(self._session_start)
@@ -108,8 +109,9 @@ class SimulatedParticipantNode(ManagedNode):
             self.get_logger().warning(f"a session_start without a time on {self.config.session_events_topic}")
             return
         with self._lock:
+            if self._session_start is None:
+                self._session_start = float(t)  # instructions are taken up on marks counted from it
             if self.strap is None:
-                self._session_start = float(t)
                 return
             if self.strap.start_session(float(t)):
                 self.get_logger().info(f"session started at ROS time {float(t):.3f} s: the seeded model "
@@ -145,9 +147,11 @@ class SimulatedParticipantNode(ManagedNode):
                 self._apply_activity()
 
     def _apply_activity(self) -> None:
+        at = takes_effect(self._now(), self._session_start, self.params.reaction_period)
         if self.strap is not None:
-            self.strap.set_activity(self.observer.activity)
-        self.get_logger().info(f"now doing {self.observer.activity}")
+            self.strap.set_activity(self.observer.activity, at)
+        when = "now" if at is None else f"from ROS time {at:.3f} s"
+        self.get_logger().info(f"{when} doing {self.observer.activity}")
 
     def _push(self, kind: str, t: np.ndarray, values: np.ndarray) -> None:
         if len(t):

@@ -12,6 +12,7 @@ at 1 Hz. Time is advanced explicitly by the caller.
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections import deque
 from dataclasses import dataclass, field
@@ -19,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hri_physio_coach.participant.physiology import (
+    SAME_TIME,
     Activity,
     HeartRateKinetics,
     ParticipantParams,
@@ -113,6 +115,8 @@ class ParticipantSimulator:
         self._hf_phase = float(self.rng.uniform(0, TWO_PI))
         self._pending_rr = 0.0  # a missed beat carries its interval into the next report
         self._recent_rr: deque[tuple[float, float]] = deque()
+        self._pending: list[tuple[float, int, Activity]] = []  # (from when, order, activity)
+        self._orders = 0
 
     @property
     def t(self) -> float:
@@ -137,9 +141,26 @@ class ParticipantSimulator:
         """The interval the heart is in: from :attr:`last_beat` to the next beat it has drawn."""
         return self._interval[1]
 
-    def set_activity(self, activity: Activity) -> None:
+    @property
+    def pending(self) -> list[tuple[float, Activity]]:
+        """Activities set to start later, as ``(from when, activity)`` in the order they start."""
+        return [(at, a) for at, _, a in self._pending]
+
+    def set_activity(self, activity: Activity, at: float | None = None) -> None:
+        """Do ``activity`` from now on, or (``at``) from the first model step that starts at or after it."""
+        if at is None or at <= self.t + SAME_TIME:
+            self._start(activity)
+            return
+        self._orders += 1
+        bisect.insort(self._pending, (at, self._orders, activity), key=lambda x: (x[0], x[1]))
+
+    def _start(self, activity: Activity) -> None:
         self.kinetics.set_activity(activity)
         self.activity = activity
+
+    def _start_due(self) -> None:
+        while self._pending and self._pending[0][0] <= self.t + SAME_TIME:
+            self._start(self._pending.pop(0)[2])
 
     def _next_rr(self, hr: float, rr_mean: float) -> float:
         x = self.kinetics.fraction_hrr
@@ -186,6 +207,8 @@ class ParticipantSimulator:
         dt, t0, step = self.kinetics.dt, self.t0, self.kinetics.step
         limit = t_end + 1e-9
         while t0 + (self._steps + 1) * dt <= limit:
+            if self._pending:
+                self._start_due()
             hr = step()
             self._steps += 1
             now = t0 + self._steps * dt

@@ -21,6 +21,10 @@ REST_VO2 = 3.5  # ml/kg/min, one MET
 STEPPING = {"step_up", "lateral", "arms_forward"}
 MARCHING = {"marching"}
 SEATED = {"base", "rest", "seated", ""}
+#: Times (s) this close count as the same: absolute ROS times carry rounding of ~1e-7 s.
+SAME_TIME = 1e-6
+#: Shortest time (s) a person takes to take in an instruction before following it (``takes_effect``).
+TAKE_IN_TIME = 1.5
 
 
 @dataclass(frozen=True)
@@ -44,6 +48,9 @@ class ParticipantParams:
     calibration_offset: float = 3.0  # bpm, seated anticipation (assumed)
     sdnn_rest: float = 0.045  # s
     artefact_rate: float = 0.005  # missed or extra beats in the reported RR
+    #: The person takes up a new instruction at the next multiple of this period (s) from the session
+    #: start (0: at once), docs/PARTICIPANT_MODEL.md "Reaction to instructions".
+    reaction_period: float = 5.0
 
     def validate(self) -> None:
         problems = []
@@ -58,6 +65,8 @@ class ParticipantParams:
                 problems.append(f"{name} must be > 0 s")
         if self.dead_time < 0:
             problems.append("dead_time must be >= 0 s")
+        if not 0 <= self.reaction_period < math.inf:
+            problems.append(f"reaction_period must be >= 0 s, got {self.reaction_period}")
         if not 0 <= self.tempo_compliance <= 1:
             problems.append(f"tempo_compliance must be in [0, 1], got {self.tempo_compliance}")
         if problems:
@@ -122,6 +131,21 @@ def net_vo2(p: ParticipantParams, activity: Activity) -> float:
 def demand(p: ParticipantParams, activity: Activity) -> float:
     """Demand u as a fraction of the oxygen-uptake reserve (~ fraction of HRR, ACSM)."""
     return net_vo2(p, activity) / (p.vo2max - REST_VO2)
+
+
+def takes_effect(heard: float, session_start: float | None, period: float) -> float | None:
+    """When a person who heard an instruction at ``heard`` starts following it (None: at once).
+
+    The person takes :data:`TAKE_IN_TIME` to take the instruction in, then changes on the next
+    multiple of ``period`` counted from the session start: the change happens at the same moment
+    whether the instruction took a millisecond or a few seconds to arrive (or the listener's clock
+    was a moment behind the sender's), so the evaluation and a closed loop on a busy machine run the
+    same physiology. Before the session start is known, or with ``period`` 0, at once.
+    """
+    if session_start is None or period <= 0:
+        return None
+    marks = math.floor((heard + TAKE_IN_TIME - session_start + SAME_TIME) / period) + 1
+    return session_start + marks * period
 
 
 class HeartRateKinetics:

@@ -34,6 +34,17 @@ MAX_HANDOVER_WAIT = 8
 MAX_START_AHEAD = 10.0
 
 
+def strap_start(now: float) -> float:
+    """Where a strap switched on at ``now`` starts its timeline: the next half second of the clock.
+
+    Its heart-rate reports then fall on half seconds, midway between the whole seconds on which a
+    coach's session starts and its rule-update windows end, so a few tenths of a second of transport
+    never move a sample into another window.
+    """
+    start = math.floor(now) + 0.5
+    return start if start >= now else start + 1.0
+
+
 def session_model(params: ParticipantParams, seed: int, t0: float = 0.0, *, ecg: bool = True,
                   ecg_rate: float = 130.0, previous_beat: float | None = None) -> ParticipantSimulator:
     """The participant's model from the session start ``t0``: what the evaluation and the node both run."""
@@ -73,8 +84,9 @@ class StrapStream:
     def in_session(self) -> bool:
         return self.session_t0 is not None
 
-    def set_activity(self, activity: Activity) -> None:
-        self.sim.set_activity(activity)
+    def set_activity(self, activity: Activity, at: float | None = None) -> None:
+        """Do ``activity`` from now on, or from ``at`` (see :meth:`ParticipantSimulator.set_activity`)."""
+        self.sim.set_activity(activity, at)
 
     def start_session(self, t_start: float) -> bool:
         """The coach's session started at ``t_start``: hand over at the first fitting second from then.
@@ -114,6 +126,8 @@ class StrapStream:
         self._candidate = None
         self.bridged = fits
         fresh.set_activity(resting.activity)
+        for due, activity in resting.pending:  # instructions heard but not taken up yet
+            fresh.set_activity(activity, due)
         self.sim = fresh
         self.session_t0 = at
         # The strap reports the bridging interval at the session model's first beat (which has none).
