@@ -95,3 +95,14 @@ def test_the_calibration_holds_the_heart_rate_taken_in_it_whenever_it_arrives() 
     kept = monitor.finish_calibration(0.0, 177.0)
     assert len(kept) == 177 and sum(kept) / len(kept) == pytest.approx(60.0 + 88 / 177)
     assert monitor.finish_calibration() == []  # finished: collected no more
+
+
+def test_a_stalled_transport_catching_up_is_not_a_restarted_clock() -> None:
+    """10 s of samples arrive together (a loaded machine): each still belongs where it was taken."""
+    monitor = HeartRateMonitor(min_valid=1)
+    samples = [(k + 0.5, (20.0 - k) if 8 <= k < 20 else 0.05, 60.0 + k) for k in range(40)]
+    fed(monitor, samples)
+    assert monitor.clock_offset == pytest.approx(AHEAD - 0.05)
+    assert monitor.take(0.0, 10.0).n_valid == 10
+    stats = monitor.take(10.0, 30.0)
+    assert stats.n_valid == 20 and stats.mean == pytest.approx(60.0 + 19.5)

@@ -96,3 +96,12 @@ def test_the_model_can_start_after_the_session(prompt: SessionRun) -> None:
     run = simulate_session(replace(SPEC, model_start=0.7), coach())
     assert run.t[0] == pytest.approx(1.7) and run.t[1] == pytest.approx(2.7)
     assert run.hr[:60] == pytest.approx(prompt.hr[:60], abs=1e-9)  # the same person at rest, 0.7 s later
+
+
+def test_a_long_stall_in_the_calibration_changes_nothing(prompt: SessionRun) -> None:
+    """12 s of heart rate arrive together (long enough to report the signal lost): HR_rest is the same."""
+    run = simulate_session(replace(SPEC, hr_stalls=((8.0, 20.0),)), coach())
+    assert run.of("hr_lost") and run.of("hr_resumed")
+    (calib,), (ref,) = run.of("calibration"), prompt.of("calibration")
+    assert (calib["n_samples"], calib["hr_rest"]) == (ref["n_samples"], ref["hr_rest"])
+    assert run.decisions == prompt.decisions

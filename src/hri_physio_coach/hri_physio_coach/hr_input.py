@@ -44,7 +44,9 @@ class BufferStats:
 #: Kinds of samples in the rule-update window.
 VALID, INVALID, FLAGGED = "valid", "invalid", "flagged"
 #: A source clock that falls back by more than this (s) against the arrivals was restarted (a strap
-#: reconnected, a replay looped): the mapping onto the coach's clock starts again.
+#: reconnected, a replay looped): the mapping onto the coach's clock starts again. Samples whose own
+#: stamps carry on from the last one (at most this far after it) are the same timeline delivered late
+#: (a stalled transport catching up), not a restart.
 CLOCK_RESET = 5.0
 #: Sample intervals remembered to know when the next sample is due.
 INTERVALS_KEPT = 9
@@ -65,6 +67,7 @@ class HeartRateMonitor:
         self._recent: deque[tuple[float, float]] = deque()
         self._calibration: list[tuple[float, float]] | None = None  # (taken, bpm) of valid samples
         self.clock_offset: float | None = None  # source clock minus coach clock (fastest sample)
+        self._last_source: float | None = None  # the last sample's own stamp
         self.newest_sample: float | None = None  # when the newest sample was taken (coach clock)
         self._intervals: deque[float] = deque(maxlen=INTERVALS_KEPT)
         self.last_receipt: float | None = None
@@ -80,7 +83,10 @@ class HeartRateMonitor:
         if source_t is None or not math.isfinite(source_t):
             return receipt_time
         lead = source_t - receipt_time
-        restarted = self.clock_offset is not None and lead < self.clock_offset - CLOCK_RESET
+        last, self._last_source = self._last_source, source_t
+        carries_on = last is not None and 0.0 < source_t - last <= CLOCK_RESET
+        restarted = (self.clock_offset is not None and lead < self.clock_offset - CLOCK_RESET
+                     and not carries_on)
         if restarted:
             self.newest_sample = None  # another timeline: intervals and order start again
             self._intervals.clear()
