@@ -59,6 +59,14 @@ def test_two_changes_for_one_mark_apply_in_the_order_heard() -> None:
     assert sim.activity == faster
 
 
+def test_a_change_for_now_replaces_the_ones_still_waiting() -> None:
+    sim = ParticipantSimulator(ParticipantParams(), seed=3, ecg=False)
+    sim.set_activity(STEP, at=5.0)
+    sim.set_activity(Activity("marching"))
+    sim.advance_hr(6.0)
+    assert sim.activity.name == "marching" and sim.pending == []
+
+
 def test_the_heart_is_the_same_however_late_the_instruction_came_within_the_period() -> None:
     runs = []
     for heard in (420.0, 420.4, 423.4):

@@ -147,8 +147,12 @@ class ParticipantSimulator:
         return [(at, a) for at, _, a in self._pending]
 
     def set_activity(self, activity: Activity, at: float | None = None) -> None:
-        """Do ``activity`` from now on, or (``at``) from the first model step that starts at or after it."""
+        """Do ``activity`` from now on, or (``at``) from the first model step that starts at or after it.
+
+        From now on, it also replaces the changes still waiting: it was heard after them.
+        """
         if at is None or at <= self.t + SAME_TIME:
+            self._pending.clear()
             self._start(activity)
             return
         self._orders += 1
