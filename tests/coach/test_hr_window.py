@@ -106,3 +106,16 @@ def test_a_stalled_transport_catching_up_is_not_a_restarted_clock() -> None:
     assert monitor.take(0.0, 10.0).n_valid == 10
     stats = monitor.take(10.0, 30.0)
     assert stats.n_valid == 20 and stats.mean == pytest.approx(60.0 + 19.5)
+
+
+def test_samples_received_before_the_coachs_clock_started_do_not_displace_the_rest() -> None:
+    """Under sim time the coach's clock reads 0 until the first /clock message; then it jumps."""
+    monitor = HeartRateMonitor(min_valid=1)
+    epoch = 1.8e9
+    for k in range(3):
+        monitor.add(0.0, 70.0, source_t=k + AHEAD)  # received at "0"
+    for k in range(3, 40):  # the clock runs: the same source timeline, received promptly
+        monitor.add(epoch + k + 0.05, 80.0, source_t=k + AHEAD)
+    assert monitor.clock_offset == pytest.approx(AHEAD - epoch - 0.05)
+    stats = monitor.take(epoch + 10.0, epoch + 30.0)
+    assert stats.n_valid == 20 and stats.mean == 80.0

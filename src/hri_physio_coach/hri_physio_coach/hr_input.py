@@ -46,8 +46,11 @@ VALID, INVALID, FLAGGED = "valid", "invalid", "flagged"
 #: A source clock that falls back by more than this (s) against the arrivals was restarted (a strap
 #: reconnected, a replay looped): the mapping onto the coach's clock starts again. Samples whose own
 #: stamps carry on from the last one (at most this far after it) are the same timeline delivered late
-#: (a stalled transport catching up), not a restart.
+#: (a stalled transport catching up), not a restart, unless they come more than
+#: :data:`MAX_DELIVERY_DELAY` late: then the coach's own clock jumped (sim time started, a replay
+#: restarted).
 CLOCK_RESET = 5.0
+MAX_DELIVERY_DELAY = 60.0
 #: Sample intervals remembered to know when the next sample is due.
 INTERVALS_KEPT = 9
 
@@ -85,8 +88,8 @@ class HeartRateMonitor:
         lead = source_t - receipt_time
         last, self._last_source = self._last_source, source_t
         carries_on = last is not None and 0.0 < source_t - last <= CLOCK_RESET
-        restarted = (self.clock_offset is not None and lead < self.clock_offset - CLOCK_RESET
-                     and not carries_on)
+        late = math.inf if self.clock_offset is None else self.clock_offset - lead  # vs the fastest
+        restarted = CLOCK_RESET < late < math.inf and (not carries_on or late > MAX_DELIVERY_DELAY)
         if restarted:
             self.newest_sample = None  # another timeline: intervals and order start again
             self._intervals.clear()
