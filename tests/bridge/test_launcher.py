@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import os
+import signal
 import stat
 import sys
 from pathlib import Path
@@ -59,7 +60,36 @@ def test_stop_sends_sigint_first_and_escalates(on_path: Path) -> None:
             assert p.returncode is None
     codes = group.stop(grace=0.5)
     assert codes["polite"] == 0 and "flushed" in polite.lines
-    assert codes["stubborn"] == -9  # SIGKILL after SIGINT and SIGTERM were ignored
+    assert codes["stubborn"] == -signal.SIGABRT  # after SIGINT and SIGTERM were ignored
+
+
+def test_a_node_stuck_on_its_way_out_prints_where_before_it_is_killed(on_path: Path) -> None:
+    """SIGINT is taken, the node then hangs (as in a close that never returns): SIGABRT shows where."""
+    script(on_path, "stuck_node", (
+        "import sys, time\n"
+        "from hri_physio_bridge.node_runner import _enable_stack_dumps\n"
+        "from hri_physio_bridge.stop_signals import install_stop_handlers\n"
+        "_enable_stack_dumps()\n"
+        "stop = install_stop_handlers()\n"
+        "def close_that_never_returns():\n"
+        "    while True: time.sleep(0.05)\n"
+        "print('ready', flush=True)\n"
+        "stop.wait()\n"
+        "close_that_never_returns()\n"))
+    script(on_path, "deaf_node", (
+        "import signal, time\n"
+        "for s in (signal.SIGINT, signal.SIGTERM, signal.SIGABRT): signal.signal(s, signal.SIG_IGN)\n"
+        "print('ready', flush=True)\n"
+        "while True: time.sleep(0.05)\n"))
+    group = ProcessGroup(out=io.StringIO())
+    stuck = group.start("stuck", "stuck_node", env=dict(os.environ))
+    deaf = group.start("deaf", "deaf_node", env=dict(os.environ))
+    for p in (stuck, deaf):
+        while "ready" not in p.lines:
+            assert p.returncode is None
+    codes = group.stop(grace=0.5)
+    assert codes == {"stuck": -signal.SIGABRT, "deaf": -signal.SIGKILL}
+    assert any("close_that_never_returns" in line for line in stuck.lines), stuck.lines
 
 
 def test_a_failed_node_is_reported_by_its_own_error_line() -> None:

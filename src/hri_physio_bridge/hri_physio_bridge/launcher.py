@@ -2,8 +2,10 @@
 
 There is no ``ros2 launch`` in the pip-wheel ROS 2 used here, so systems are
 started by this launcher (on a full ROS 2 install the same nodes also run with
-``ros2 run``). Stopping sends SIGINT, then SIGTERM, then SIGKILL, each after a
-grace period, so nodes can flush their logs and bags. Each process's whole output can go
+``ros2 run``). Stopping sends SIGINT, then SIGTERM, then SIGABRT, then SIGKILL, each after a
+grace period, so nodes can flush their logs and bags; a node that hangs on its way out prints every
+thread's stack on SIGABRT (``run_node`` enables :mod:`faulthandler`) before it dies, so its log
+shows where it was stuck. Each process's whole output can go
 to a log file of its own (``log_path``), whatever is echoed to the console.
 """
 
@@ -155,7 +157,9 @@ class ProcessGroup:
 
     @staticmethod
     def _stop_one(p: ManagedProcess, grace: float) -> int:
-        for sig, wait in ((signal.SIGINT, grace), (signal.SIGTERM, grace / 2), (signal.SIGKILL, 5.0)):
+        steps = ((signal.SIGINT, grace), (signal.SIGTERM, grace / 2), (signal.SIGABRT, 2.0),
+                 (signal.SIGKILL, 5.0))
+        for sig, wait in steps:
             if p.proc.poll() is not None:
                 break
             p.proc.send_signal(sig)

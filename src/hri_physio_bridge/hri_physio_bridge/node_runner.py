@@ -18,6 +18,9 @@ stderr and exit status 2, never a traceback.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import faulthandler
+import io
 import logging
 import sys
 import threading
@@ -236,6 +239,17 @@ def fail(prog: str, message: str) -> int:
     return 2
 
 
+def _enable_stack_dumps() -> None:
+    """A crash, or the launcher's SIGABRT to a node stuck on its way out, prints every thread's stack.
+
+    Left as it is where it is already on (e.g. under pytest), or where stderr is no real file.
+    """
+    if faulthandler.is_enabled():
+        return
+    with contextlib.suppress(AttributeError, ValueError, io.UnsupportedOperation):
+        faulthandler.enable(file=sys.stderr, all_threads=True)
+
+
 def run_node(
     prog: str,
     config_cls: type[C],
@@ -259,6 +273,7 @@ def run_node(
     ``offline(config, args)``, if given, runs before ROS starts: a mode that needs no ROS
     (``replayer --info``, ``recorder --repair``) returns its exit status there; None goes on.
     """
+    _enable_stack_dumps()
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser(prog, config_cls, description, epilog, extra_arguments, default_conf)
     try:
