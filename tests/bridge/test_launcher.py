@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from hri_physio_bridge.launcher import ProcessGroup, find_executable
+from hri_physio_bridge.launcher import ManagedProcess, ProcessGroup, find_executable
 
 pytestmark = pytest.mark.integration  # starts processes
 
@@ -27,6 +27,15 @@ def script(tmp_path: Path, name: str, body: str) -> str:
 def on_path(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     monkeypatch.setenv("PATH", f"{tmp_path}{os.pathsep}{os.environ['PATH']}")
     return tmp_path
+
+
+def started(group: ProcessGroup, *names: str) -> list[ManagedProcess]:
+    """Start the scripts ``<name>_node`` as ``name`` and wait until each has printed 'ready'."""
+    procs = [group.start(name, f"{name}_node", env=dict(os.environ)) for name in names]
+    for p in procs:
+        while "ready" not in p.lines:
+            assert p.returncode is None
+    return procs
 
 
 def test_output_is_prefixed_and_kept(on_path: Path) -> None:
@@ -53,11 +62,7 @@ def test_stop_sends_sigint_first_and_escalates(on_path: Path) -> None:
         "print('ready', flush=True)\n"
         "while True: time.sleep(0.05)\n"))
     group = ProcessGroup(out=io.StringIO())
-    polite = group.start("polite", "polite_node", env=dict(os.environ))
-    stubborn = group.start("stubborn", "stubborn_node", env=dict(os.environ))
-    for p in (polite, stubborn):
-        while "ready" not in p.lines:
-            assert p.returncode is None
+    polite, _ = started(group, "polite", "stubborn")
     codes = group.stop(grace=0.5)
     assert codes["polite"] == 0 and "flushed" in polite.lines
     assert codes["stubborn"] == -signal.SIGABRT  # after SIGINT and SIGTERM were ignored
@@ -82,11 +87,7 @@ def test_a_node_stuck_on_its_way_out_prints_where_before_it_is_killed(on_path: P
         "print('ready', flush=True)\n"
         "while True: time.sleep(0.05)\n"))
     group = ProcessGroup(out=io.StringIO())
-    stuck = group.start("stuck", "stuck_node", env=dict(os.environ))
-    deaf = group.start("deaf", "deaf_node", env=dict(os.environ))
-    for p in (stuck, deaf):
-        while "ready" not in p.lines:
-            assert p.returncode is None
+    stuck, _ = started(group, "stuck", "deaf")
     codes = group.stop(grace=0.5)
     assert codes == {"stuck": -signal.SIGABRT, "deaf": -signal.SIGKILL}
     assert any("close_that_never_returns" in line for line in stuck.lines), stuck.lines
