@@ -29,6 +29,13 @@ def on_path(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     return tmp_path
 
 
+def ignoring(on_path: Path, name: str, *signals: str) -> str:
+    """A script that ignores ``signals``, prints 'ready' and idles."""
+    ignore = "".join(f"signal.signal(signal.{sig}, signal.SIG_IGN)\n" for sig in signals)
+    return script(on_path, name, f"import signal, time\n{ignore}print('ready', flush=True)\n"
+                                 "while True: time.sleep(0.05)\n")
+
+
 def started(group: ProcessGroup, *names: str) -> list[ManagedProcess]:
     """Start the scripts ``<name>_node`` as ``name`` and wait until each has printed 'ready'."""
     procs = [group.start(name, f"{name}_node", env=dict(os.environ)) for name in names]
@@ -55,12 +62,7 @@ def test_stop_sends_sigint_first_and_escalates(on_path: Path) -> None:
         "signal.signal(signal.SIGINT, lambda *a: (print('flushed', flush=True), sys.exit(0)))\n"
         "print('ready', flush=True)\n"
         "while True: time.sleep(0.05)\n"))
-    script(on_path, "stubborn_node", (
-        "import signal, time\n"
-        "signal.signal(signal.SIGINT, signal.SIG_IGN)\n"
-        "signal.signal(signal.SIGTERM, signal.SIG_IGN)\n"
-        "print('ready', flush=True)\n"
-        "while True: time.sleep(0.05)\n"))
+    ignoring(on_path, "stubborn_node", "SIGINT", "SIGTERM")
     group = ProcessGroup(out=io.StringIO())
     polite, _ = started(group, "polite", "stubborn")
     codes = group.stop(grace=0.5)
@@ -81,11 +83,7 @@ def test_a_node_stuck_on_its_way_out_prints_where_before_it_is_killed(on_path: P
         "print('ready', flush=True)\n"
         "stop.wait()\n"
         "close_that_never_returns()\n"))
-    script(on_path, "deaf_node", (
-        "import signal, time\n"
-        "for s in (signal.SIGINT, signal.SIGTERM, signal.SIGABRT): signal.signal(s, signal.SIG_IGN)\n"
-        "print('ready', flush=True)\n"
-        "while True: time.sleep(0.05)\n"))
+    ignoring(on_path, "deaf_node", "SIGINT", "SIGTERM", "SIGABRT")
     group = ProcessGroup(out=io.StringIO())
     stuck, _ = started(group, "stuck", "deaf")
     codes = group.stop(grace=0.5)
