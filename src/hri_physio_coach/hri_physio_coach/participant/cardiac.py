@@ -115,8 +115,7 @@ class ParticipantSimulator:
         self._hf_phase = float(self.rng.uniform(0, TWO_PI))
         self._pending_rr = 0.0  # a missed beat carries its interval into the next report
         self._recent_rr: deque[tuple[float, float]] = deque()
-        self._pending: list[tuple[float, int, Activity]] = []  # (from when, order, activity)
-        self._orders = 0
+        self._pending: list[tuple[float, Activity]] = []  # (from when, activity), in the order they start
 
     @property
     def t(self) -> float:
@@ -144,7 +143,7 @@ class ParticipantSimulator:
     @property
     def pending(self) -> list[tuple[float, Activity]]:
         """Activities set to start later, as ``(from when, activity)`` in the order they start."""
-        return [(at, a) for at, _, a in self._pending]
+        return list(self._pending)
 
     def set_activity(self, activity: Activity, at: float | None = None) -> None:
         """Do ``activity`` from now on, or (``at``) from the first model step that starts at or after it.
@@ -155,8 +154,7 @@ class ParticipantSimulator:
             self._pending.clear()
             self._start(activity)
             return
-        self._orders += 1
-        bisect.insort(self._pending, (at, self._orders, activity), key=lambda x: (x[0], x[1]))
+        bisect.insort(self._pending, (at, activity), key=lambda change: change[0])  # after equal times
 
     def _start(self, activity: Activity) -> None:
         self.kinetics.set_activity(activity)
@@ -164,7 +162,7 @@ class ParticipantSimulator:
 
     def _start_due(self) -> None:
         while self._pending and self._pending[0][0] <= self.t + SAME_TIME:
-            self._start(self._pending.pop(0)[2])
+            self._start(self._pending.pop(0)[1])
 
     def _next_rr(self, hr: float, rr_mean: float) -> float:
         x = self.kinetics.fraction_hrr
