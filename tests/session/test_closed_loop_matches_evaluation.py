@@ -30,6 +30,7 @@ The comparison can fail: the same recording is checked against the evaluation of
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import subprocess
 import sys
@@ -58,6 +59,7 @@ TOLERANCE_S = 0.5
 HR_TOLERANCE_BPM = 0.01
 
 
+@functools.cache
 def model_start(folder: Path) -> float:
     """When (s after the coach's session_start) the participant's seeded model took over."""
     bag = read_bag(folder / "bag")
