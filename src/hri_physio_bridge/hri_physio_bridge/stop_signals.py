@@ -1,24 +1,66 @@
-"""SIGINT/SIGTERM as one stop event, for node processes and launchers alike (no rclpy here)."""
+"""SIGINT/SIGTERM as one stop event, for node processes and launchers alike (no rclpy here).
+
+Nothing is done in the Python-level signal handler itself. Python runs a handler on the main
+thread between two bytecodes, which may be inside ``threading.Event.wait()`` while that thread
+holds the event's internal lock; a handler that then sets the same event (or takes any lock the
+main thread may hold) waits for itself forever. That was the shutdown hang of the nodes: the
+main thread waiting on the stop event, SIGINT arriving while it re-acquired the event's lock,
+the handler's ``stop.set()`` blocking on that lock (stack dumps showed ``handler -> Event.set``
+under ``Event.wait``). So the C-level handler's wakeup byte (``signal.set_wakeup_fd``) is read by
+a watcher thread, which sets the event and calls ``on_stop`` like any other thread would.
+"""
 
 from __future__ import annotations
 
+import contextlib
+import os
 import signal
 import threading
 from collections.abc import Callable
 from typing import Any
 
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+#: The write end of the pipe installed last (a second installation replaces the first).
+_installed: list[int] = []
+
+
+def _do_nothing(_signum: int, _frame: Any) -> None:
+    """The Python-level handler: only there so that the signal does not kill the process."""
+
 
 def install_stop_handlers(on_stop: Callable[[str], None] | None = None) -> threading.Event:
-    """SIGINT/SIGTERM set the returned event (and call ``on_stop`` once) instead of raising."""
+    """SIGINT/SIGTERM call ``on_stop`` once and then set the returned event, on a watcher thread.
+
+    Call it from the main thread (as ``signal.signal`` requires). A signal that comes while the
+    main thread holds a lock, even the returned event's own, is handled once the lock is free.
+    """
     stop = threading.Event()
+    read_fd, write_fd = os.pipe()
+    os.set_blocking(write_fd, False)
+    wanted = {int(s) for s in STOP_SIGNALS}
 
-    def handler(signum: int, _frame: Any) -> None:
-        if stop.is_set():
-            return
-        stop.set()
-        if on_stop is not None:
-            on_stop(signal.Signals(signum).name)
+    def watch() -> None:
+        while True:
+            try:
+                received = os.read(read_fd, 64)
+            except OSError:
+                return
+            if not received:
+                return
+            for signum in received:
+                if signum in wanted and not stop.is_set():
+                    # on_stop first: what it records is there for whoever sees the event set.
+                    if on_stop is not None:
+                        on_stop(signal.Signals(signum).name)
+                    stop.set()
 
-    signal.signal(signal.SIGINT, handler)
-    signal.signal(signal.SIGTERM, handler)
+    threading.Thread(target=watch, name="stop-signals", daemon=True).start()
+    previous = signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
+    if previous in _installed:  # ours from an earlier call: its watcher sees the pipe close and ends
+        _installed.remove(previous)
+        with contextlib.suppress(OSError):
+            os.close(previous)
+    _installed.append(write_fd)
+    for s in STOP_SIGNALS:
+        signal.signal(s, _do_nothing)
     return stop
