@@ -73,14 +73,17 @@ def option(
     *,
     unit: str | None = None,
     switch: bool = False,
+    dynamic: bool = False,
     **constraints: Any,
 ) -> Any:
     """A field with its help text, unit and bounds (``ge``, ``gt``, ``le``, ``lt``, ...).
 
     ``switch=True`` makes the command-line flag a bare switch (``--interactive``) instead of
-    ``--interactive true``.
+    ``--interactive true``. ``dynamic=True`` marks an option the node applies when its ROS
+    parameter is set at run time (the node's ``apply_config``); every other option's parameter
+    is read-only, so a change the node would not apply is refused instead of silently ignored.
     """
-    extra = {"unit": unit, "switch": switch}
+    extra = {"unit": unit, "switch": switch, "dynamic": dynamic}
     if isinstance(default, list):
         return Field(default_factory=lambda d=default: list(d), description=help,
                      json_schema_extra=extra, **constraints)
@@ -229,6 +232,8 @@ class NodeConfig(BaseModel):
             text += f" [{unit}]"
         if bounds:
             text += f" ({bounds})"
+        if _extra(info).get("dynamic"):
+            text += " (settable at run time)"
         default = info.get_default(call_default_factory=True)
         if isinstance(default, list):
             default = ",".join(str(v) for v in default)
@@ -238,6 +243,15 @@ class NodeConfig(BaseModel):
     def help_text(cls, name: str) -> str:
         """:meth:`describe` escaped for argparse (which formats help with ``%``)."""
         return cls.describe(name).replace("%", "%%")
+
+    @classmethod
+    def is_dynamic(cls, name: str) -> bool:
+        """True when the node applies a change of this option at run time (``option(..., dynamic=True)``)."""
+        return bool(_extra(cls.model_fields[name]).get("dynamic"))
+
+    @classmethod
+    def dynamic_options(cls) -> tuple[str, ...]:
+        return tuple(name for name in cls.model_fields if cls.is_dynamic(name))
 
     @classmethod
     def kind(cls, name: str) -> str:

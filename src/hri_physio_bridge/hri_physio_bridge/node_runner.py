@@ -29,9 +29,10 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import rclpy
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import NameValidationException, ParameterException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
 from hri_physio_bridge.config import (
@@ -69,6 +70,10 @@ class ManagedNode(Node):
         are dynamically typed (a YAML ``130`` for a float option is fine): the model checks
         types and bounds, and descriptors carry the description and range for introspection.
         Unknown parameters given to this node are an error, as unknown options are.
+
+        At run time a parameter is read-only unless its option is ``dynamic``: rclpy refuses a
+        change of a read-only one (``parameter is read-only``); a change of a dynamic one is
+        checked by the model and applied by :meth:`apply_config`, or refused with the reason.
         """
         cls = type(config)
         values: dict[str, Any] = {}
@@ -90,7 +95,43 @@ class ManagedNode(Node):
                 f"unknown parameter(s) {', '.join(unknown)} for {self.get_name()}; "
                 f"known: {', '.join(cls.model_fields)}"
             )
-        return cls.from_mapping(values, source=f"{self.get_name()} parameters")
+        resolved = cls.from_mapping(values, source=f"{self.get_name()} parameters")
+        self._declared_config: NodeConfig = resolved
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        return resolved
+
+    def apply_config(self, config: Any, changed: tuple[str, ...]) -> None:
+        """Apply a validated configuration whose dynamic options ``changed`` (raise ValueError to refuse).
+
+        Called on the executor thread. Nodes with ``dynamic`` options override it; the default
+        applies nothing, so a node must not mark an option dynamic without overriding this.
+        """
+        raise ValueError(f"{self.get_name()} applies no change of {', '.join(changed)} at run time")
+
+    def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        """Check a run-time change with the configuration model, then let the node apply it."""
+        current = getattr(self, "_declared_config", None)
+        if current is None:
+            return SetParametersResult(successful=True)  # still declaring
+        fields = type(current).model_fields
+        changes = {p.name: p.value for p in params if p.name in fields}
+        if not changes:
+            return SetParametersResult(successful=True)  # rclpy's own (use_sim_time, ...)
+        fixed = sorted(n for n in changes if not type(current).is_dynamic(n))
+        if fixed:  # rclpy refuses read-only parameters before asking; kept for a descriptor changed later
+            return SetParametersResult(successful=False,
+                                       reason=f"{', '.join(fixed)}: read-only (applied only at start-up)")
+        try:
+            candidate = type(current).from_mapping({**current.as_dict(), **changes}, "parameter change")
+            self.apply_config(candidate, tuple(sorted(changes)))
+        except (ConfigError, ValueError) as exc:
+            reason = str(exc).removeprefix("parameter change: ")
+            self.get_logger().warning(f"refused a parameter change: {reason}")
+            return SetParametersResult(successful=False, reason=reason)
+        self._declared_config = candidate
+        self.get_logger().info("parameter change applied: " + ", ".join(
+            f"{n}={getattr(candidate, n)!r}" for n in sorted(changes)))
+        return SetParametersResult(successful=True)
 
     def run(self, stop: threading.Event) -> int:
         while not stop.wait(0.1):
@@ -118,7 +159,7 @@ def _ros_value(value: Any) -> Any:
 def _descriptor(cls: type[NodeConfig], name: str) -> ParameterDescriptor:
     bounds = cls.bounds(name)
     desc = ParameterDescriptor(
-        name=name, description=cls.describe(name), dynamic_typing=True,
+        name=name, description=cls.describe(name), dynamic_typing=True, read_only=not cls.is_dynamic(name),
         additional_constraints=", ".join(f"{k} {v}" for k, v in bounds.items()),
     )
     low = bounds.get("ge", bounds.get("gt"))

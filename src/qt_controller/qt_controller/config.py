@@ -77,13 +77,15 @@ class MockQtRobotConfig(NodeConfig):
                                      "package's exercise gestures always load)")
     extra_emotions: list[str] = option([], "comma-separated emotion names beyond QT's standard set")
     speech_seconds_per_char: float = option(0.06, "speaking time per character at the default speech "
-                                            "speed (80)", unit="s", gt=0)
-    emotion_seconds: float = option(3.0, "how long an emotion stays on the face", unit="s", gt=0)
-    max_joint_speed: float = option(120.0, "joint speed at 100 percent velocity", unit="deg/s", gt=0)
+                                            "speed (80)", unit="s", gt=0, dynamic=True)
+    emotion_seconds: float = option(3.0, "how long an emotion stays on the face", unit="s", gt=0,
+                                    dynamic=True)
+    max_joint_speed: float = option(120.0, "joint speed at 100 percent velocity", unit="deg/s", gt=0,
+                                    dynamic=True)
     default_velocity: float = option(50.0, "motor velocity at start", unit="percent", gt=0, le=100)
     default_volume: int = option(50, "speaker volume at start", unit="percent", ge=0, le=100)
     gesture_busy_policy: Literal["interrupt", "refuse"] = option(
-        "interrupt", "a gesture requested while one plays: interrupt it or refuse the new one")
+        "interrupt", "a gesture requested while one plays: interrupt it or refuse the new one", dynamic=True)
     joint_state_rate: float = option(30.0, "rate of /qt_robot/joints/state on ROS time", unit="Hz", gt=0)
     service_backend: ServiceBackend = option("auto", _BACKEND_HELP)
     events_topic: str = option(topics.QT_MOCK_EVENTS, "JSON events of every action", min_length=1)

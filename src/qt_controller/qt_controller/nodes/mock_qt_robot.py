@@ -111,6 +111,11 @@ class MockQtRobotNode(ManagedNode):
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 
+    def apply_config(self, config: MockQtRobotConfig, changed: tuple[str, ...]) -> None:
+        """The simulated timing (speech, emotions, joint speed) and the busy policy, from now on."""
+        self.robot.config = config.settings(MockConfig)
+        self.config = config
+
     def _acting(self, action: Callable[[Any], Any]) -> Callable[[Any], None]:
         def callback(msg: Any) -> None:
             result = action(msg)
