@@ -40,8 +40,9 @@ from hri_physio_bridge.streamers.base import (
 )
 from hri_physio_bridge.streamers.csv_stream import CsvWriter
 from hri_physio_bridge.streamers.factory import split_uri
+from hri_physio_bridge.streamers.opener import StreamOpener
 from hri_physio_bridge.timeline import ClockJump, RateMeter, TimelineCheck
-from hri_physio_bridge.waiting import Backoff, StreamOpener, wait_for_consumers
+from hri_physio_bridge.waiting import Backoff, wait_for_consumers
 
 #: The measured rate may differ from sampling_rate by this share before it is warned about.
 RATE_TOLERANCE = 0.05

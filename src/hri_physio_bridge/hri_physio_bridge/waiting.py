@@ -1,8 +1,10 @@
-"""Waiting, written once: deadlines on an injected clock, backoff, opening inputs, waiting for consumers.
+"""Waiting, written once: deadlines on an injected clock, backoff, waiting for consumers.
 
-Every node that opens a stream (receiver, processor, simulator, Polar streamer) and every
-loop that polls until a deadline uses these, so a wait is always bounded or stoppable, idle
-between polls (no busy loop), and logged at a bounded rate. Nothing here imports rclpy.
+Every node that opens a stream (receiver, processor, simulator, Polar streamer) and every loop
+that polls until a deadline uses these, so a wait is always bounded or stoppable, idle between
+polls (no busy loop), and logged at a bounded rate. Opening an input that may not be there yet is
+:class:`hri_physio_bridge.streamers.opener.StreamOpener`, built on these. Nothing here imports
+rclpy, and nothing here knows streamers (they use this module, not the other way round).
 """
 
 from __future__ import annotations
@@ -13,15 +15,6 @@ import threading
 import time
 from collections.abc import Callable
 
-from hri_physio_bridge.rate_limit import RateLimitedLog
-from hri_physio_bridge.streamers.base import (
-    OpenCancelled,
-    Streamer,
-    StreamLostError,
-    StreamNotFoundError,
-    StreamSpec,
-)
-
 Clock = Callable[[], float]
 #: Sleeps up to the given seconds; returns True when the wait should end early (a stop).
 Sleeper = Callable[[float], bool]
@@ -29,7 +22,8 @@ Sleeper = Callable[[float], bool]
 DEFAULT_POLL = 0.05
 
 
-def _sleeper(stop: threading.Event | None) -> Sleeper:
+def sleeper_for(stop: threading.Event | None) -> Sleeper:
+    """Sleeps on ``stop`` (ended early by a stop) or, without one, plain ``time.sleep``."""
     if stop is not None:
         return stop.wait
     return lambda seconds: (time.sleep(seconds), False)[1]
@@ -50,7 +44,7 @@ def wait_until(
     between polls the thread sleeps on ``stop`` (or ``sleep``), so the wait is idle and a stop
     ends it at once.
     """
-    sleep = sleep or _sleeper(stop)
+    sleep = sleep or sleeper_for(stop)
     deadline = None if timeout is None else clock() + timeout
     while True:
         if condition():
@@ -124,54 +118,3 @@ def wait_for_consumers(
     have = f"only {count()} of {want} consumers" if want > 1 else "no consumer"
     log.warning(f"{have} on {what} after {timeout:g} s; starting anyway")
     return False
-
-
-class StreamOpener:
-    """Opens an input streamer: one bounded attempt, or (``retry``) attempts until it appears or a stop.
-
-    Each attempt waits up to ``timeout`` s inside the streamer. With ``retry``, attempts are
-    separated by a :class:`Backoff` delay and "still waiting" is logged at most every
-    ``log_period`` s. Only :class:`StreamNotFoundError` and :class:`StreamLostError` are retried:
-    a source that cannot exist (a missing file, a bad address) is raised at once. A stop raises
-    :class:`OpenCancelled`.
-    """
-
-    def __init__(
-        self,
-        streamer: Streamer,
-        expected: StreamSpec | None,
-        *,
-        timeout: float,
-        retry: bool,
-        log: logging.Logger,
-        stop: threading.Event | None = None,
-        clock: Clock = time.monotonic,
-        backoff: Backoff | None = None,
-        log_period: float = 30.0,
-        sleep: Sleeper | None = None,
-    ) -> None:
-        self.streamer, self.expected, self.timeout, self.retry = streamer, expected, timeout, retry
-        self.log, self.stop = log, stop
-        self.backoff = backoff or Backoff(initial=0.5, maximum=5.0)
-        self._sleep = sleep or _sleeper(stop)
-        self._waiting = RateLimitedLog(log.warning, period=log_period, monotonic=clock)
-        self.attempts = 0
-
-    def open(self) -> StreamSpec:
-        self.backoff.reset()
-        while True:
-            if self.stop is not None and self.stop.is_set():
-                raise OpenCancelled(f"stopped while waiting for {self.streamer.uri}")
-            self.attempts += 1
-            try:
-                return self.streamer.open_input(self.expected, timeout=self.timeout, stop=self.stop)
-            except OpenCancelled:
-                raise
-            except (StreamNotFoundError, StreamLostError) as exc:
-                # Absent, or gone again while opening (LSL may list an outlet for a moment after it
-                # closed): both can change, so a retrying opener tries again.
-                if not self.retry:
-                    raise
-                self._waiting.report("absent", f"{exc}; still waiting", "attempt(s)")
-            if self._sleep(self.backoff.next_delay()):
-                raise OpenCancelled(f"stopped while waiting for {self.streamer.uri}")

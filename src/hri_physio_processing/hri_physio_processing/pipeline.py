@@ -2,7 +2,7 @@
 
 The node wires the streamers and publishers; this module decides when to wait and for how
 long. A file input that is not there is an error at once; a stream that may still appear
-(LSL, ROS) is waited for by :class:`~hri_physio_bridge.waiting.StreamOpener`: bounded
+(LSL, ROS) is waited for by :class:`~hri_physio_bridge.streamers.opener.StreamOpener`: bounded
 attempts, an idle backoff between them and a rate-limited "still waiting" line, until it
 appears or the node is stopped. A lost input closes the current segment and is waited for
 the same way.
@@ -35,7 +35,8 @@ from hri_physio_bridge.streamers.base import (
     StreamLostError,
     StreamSpec,
 )
-from hri_physio_bridge.waiting import Backoff, Clock, Sleeper, StreamOpener, wait_for_consumers
+from hri_physio_bridge.streamers.opener import StreamOpener
+from hri_physio_bridge.waiting import Backoff, Clock, Sleeper, wait_for_consumers
 from hri_physio_processing.config import ProcessorConfig
 from hri_physio_processing.processor import NeurokitProcessor, Output, StatusOutput
 

@@ -14,7 +14,7 @@ from typing import Literal
 from pydantic import field_validator
 
 from hri_physio_bridge.bag.errors import BagError
-from hri_physio_bridge.bag.topics import bag_name, parse_remaps
+from hri_physio_bridge.bag.topic_selection import bag_name, parse_remaps
 from hri_physio_bridge.bag.writer import DEFAULT_CHUNK_SIZE, DEFAULT_FLUSH_PERIOD, DEFAULT_FSYNC_PERIOD
 from hri_physio_bridge.config import NodeConfig, option
 

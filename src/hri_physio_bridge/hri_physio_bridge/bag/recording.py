@@ -29,7 +29,7 @@ from hri_physio_bridge.bag.msgdefs import (
     installed_type_hash,
     message_definition,
 )
-from hri_physio_bridge.bag.topics import TopicSelector
+from hri_physio_bridge.bag.topic_selection import TopicSelector
 from hri_physio_bridge.bag.writer import BagWriter
 from hri_physio_bridge.rate_limit import RateLimitedLog
 

@@ -31,7 +31,7 @@ from rclpy.node import Node
 
 from hri_physio_bridge.bag.errors import BagError
 from hri_physio_bridge.bag.options import RecorderConfig
-from hri_physio_bridge.bag.topics import TopicSelector, bag_name
+from hri_physio_bridge.bag.topic_selection import TopicSelector, bag_name
 from hri_physio_bridge.node_runner import ManagedNode, logic_logger, run_node
 from hri_physio_bridge.periodic import Periodic
 
@@ -157,7 +157,7 @@ class RecorderNode(ManagedNode):
         self.get_logger().info(f"{signal_name} received: closing the bag")
 
     def discover(self) -> None:
-        from hri_physio_bridge.bag.qos import adapted_qos, qos_to_dict
+        from hri_physio_bridge.bag.recorded_qos import adapted_qos, qos_to_dict
 
         for cand in self.session.candidates(self.capture.get_topic_names_and_types()):
             infos = self.capture.get_publishers_info_by_topic(cand.topic)

@@ -26,7 +26,7 @@ from hri_physio_bridge.bag.errors import BagError
 from hri_physio_bridge.bag.options import ReplayerConfig
 from hri_physio_bridge.bag.playback import NS, PlaybackOptions, Player
 from hri_physio_bridge.bag.reader import BagMessage, BagReader
-from hri_physio_bridge.bag.topics import TopicSelector
+from hri_physio_bridge.bag.topic_selection import TopicSelector
 from hri_physio_bridge.node_runner import ManagedNode, run_node
 from hri_physio_bridge.waiting import wait_until
 
@@ -134,7 +134,7 @@ class ReplayerNode(ManagedNode):
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
         from rosgraph_msgs.msg import Clock
 
-        from hri_physio_bridge.bag.qos import adapted_qos
+        from hri_physio_bridge.bag.recorded_qos import adapted_qos
 
         super().__init__(PROG, **kwargs)
         self.config = cfg = self.declare_config(config)

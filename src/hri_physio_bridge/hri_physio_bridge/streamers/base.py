@@ -90,6 +90,10 @@ class StreamSpec:
     dtype: str = "float64"
     source_id: str = ""
     channels: tuple[str, ...] = field(default=())
+    #: Optional description an output carries where its transport can (LSL's stream description):
+    #: each channel's unit (empty, or one per channel) and the acquisition device's (key, value) pairs.
+    units: tuple[str, ...] = field(default=())
+    device: tuple[tuple[str, str], ...] = field(default=())
 
     def __post_init__(self) -> None:
         self.dtype = canonical_dtype(self.dtype)
@@ -104,6 +108,10 @@ class StreamSpec:
             raise ValueError(
                 f"{len(self.channels)} channel names given for {self.channel_count} channels"
             )
+        self.units = tuple(self.units)
+        if self.units and len(self.units) != self.channel_count:
+            raise ValueError(f"{len(self.units)} units given for {self.channel_count} channels")
+        self.device = tuple((str(k), str(v)) for k, v in self.device)
 
     @property
     def is_string(self) -> bool:

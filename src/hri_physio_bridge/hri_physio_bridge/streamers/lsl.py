@@ -44,6 +44,8 @@ _FROM_LSL = {v: k for k, v in _TO_LSL.items()}
 _QUERY_KEYS = {"type", "source_id", "sync"}
 #: Seconds between two looks at the resolver's results while waiting for an input stream.
 RESOLVE_POLL = 0.05
+#: Seconds a closing outlet with consumers waits for them to take its last chunk (liblsl has no flush).
+LINGER = 0.2
 
 
 def parse_lsl_address(address: str) -> tuple[str, dict[str, str]]:
@@ -176,18 +178,29 @@ class LslStreamer(Streamer):
 
     # -- output --------------------------------------------------------------
     def open_output(self, spec: StreamSpec) -> None:
+        """An outlet declaring ``spec``: channel labels (and units, type) and the acquisition device."""
         self.close()
+        stream_type = self.params.get("type") or spec.type
         info = pylsl.StreamInfo(
             name=self.name,
-            type=self.params.get("type") or spec.type,
+            type=stream_type,
             channel_count=spec.channel_count,
             nominal_srate=spec.nominal_rate,
             channel_format=_TO_LSL[spec.dtype],
             source_id=self.params.get("source_id") or spec.source_id,
         )
-        chans = info.desc().append_child("channels")
-        for label in spec.channels:
-            chans.append_child("channel").append_child_value("label", label)
+        desc = info.desc()
+        chans = desc.append_child("channels")
+        for i, label in enumerate(spec.channels):
+            channel = chans.append_child("channel")
+            channel.append_child_value("label", label)
+            if spec.units:
+                channel.append_child_value("unit", spec.units[i])
+                channel.append_child_value("type", stream_type)
+        if spec.device:
+            acquisition = desc.append_child("acquisition")
+            for key, value in spec.device:
+                acquisition.append_child_value(key, value)
         self._outlet = pylsl.StreamOutlet(info, chunk_size=0, max_buffered=self.max_buflen)
         self.spec = spec
         self._dtype = numpy_dtype(spec.dtype)
@@ -211,15 +224,16 @@ class LslStreamer(Streamer):
     def has_consumers(self) -> bool:
         return bool(self._outlet is not None and self._outlet.have_consumers())
 
-    def close(self) -> None:
+    def close(self, linger: float = LINGER) -> None:
+        """Close the inlet or outlet; an outlet with consumers first waits ``linger`` s for them."""
         if self._inlet is not None:
             try:
                 self._inlet.close_stream()
             finally:
                 self._inlet = None
-        if self._outlet is not None and self._outlet.have_consumers():
+        if self._outlet is not None and linger > 0 and self._outlet.have_consumers():
             # liblsl has no flush: give connected inlets a moment to take the last chunk.
-            time.sleep(0.2)
+            time.sleep(linger)
         self._outlet = None  # liblsl destroys the outlet with the object
 
 
