@@ -2,7 +2,7 @@
 
 The routine file says what happens when (phases, activities, media, speech); this module
 gives the scenario its exercise-specific parts: the calibration of HR_rest and the zone,
-the HR buffer, the rule update (an :class:`~hri_physio_coach.policies.Adapter` on the speed
+the HR buffer, the rule update (an :class:`~hri_physio_coach.policies.adapter.Adapter` on the speed
 ladder, gated on signal quality), the random behaviours, the calibration reminders, and
 the robot commands (typed :mod:`qt_controller.commands`, written with ``to_line()``). Every
 decision becomes a JSON-able event with its inputs and outputs and the participant id (never
@@ -37,7 +37,9 @@ from hri_physio_coach.hr_input import HeartRateMonitor
 from hri_physio_coach.ladder import SpeedLadder
 from hri_physio_coach.media_names import tempo_from_name
 from hri_physio_coach.paths import default_routine_file
-from hri_physio_coach.policies import (
+from hri_physio_coach.policies.adapter import Adapter
+from hri_physio_coach.policies.registry import make_policy
+from hri_physio_coach.policies.types import (
     AT_LIMIT,
     CHANGE_ACTIVITY,
     ENCOURAGE,
@@ -47,11 +49,9 @@ from hri_physio_coach.policies import (
     SCHEDULED_SLOW_DOWN,
     SLOW_DOWN,
     SPEED_UP,
-    Adapter,
     Controls,
     Decision,
     RuleInput,
-    make_policy,
 )
 from hri_physio_coach.routine import Action, Activity, Phase, Routine, load_routine
 from hri_physio_coach.zones import HeartRateZone, tanaka_hr_max

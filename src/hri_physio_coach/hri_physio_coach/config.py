@@ -22,7 +22,8 @@ from pydantic import model_validator
 
 from hri_physio_bridge import topics
 from hri_physio_bridge.config import ConfigError, NodeConfig, option
-from hri_physio_coach.policies import POLICY_NAMES, AdapterOptions
+from hri_physio_coach.policies.adapter import AdapterOptions
+from hri_physio_coach.policies.registry import POLICY_NAMES
 from qt_controller.commands import GESTURE_SPEED_RANGE
 
 __all__ = ["COACH_NODE", "CoachConfig", "CoachNodeConfig", "ConfigError", "load_config", "participant_id"]
@@ -201,8 +202,7 @@ class CoachConfig(NodeConfig):
     def adapter_options(self) -> AdapterOptions:
         cap = self.adapt_warmup_max_speedups
         return AdapterOptions(
-            refractory=self.adapt_refractory,
-            refractory_period=self.adapt_refractory_period,
+            refractory_period=self.adapt_refractory_period if self.adapt_refractory else None,
             conditioning_only=self.adapt_conditioning_only,
             cooldown_schedule=self.adapt_cooldown_schedule,
             warmup_max_speedups=None if cap < 0 else cap,

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from qt_controller.commands import SPEECH_PITCH_RANGE, SPEECH_SPEED_RANGE
+from qt_controller.config import MockQtRobotConfig
 from qt_controller.emotions import EmotionCatalogue
 from qt_controller.gestures import Gesture, GestureLibrary
 from qt_controller.joint_limits import (
@@ -46,15 +47,24 @@ Event = dict[str, Any]
 
 @dataclass
 class MockConfig:
-    speech_seconds_per_char: float = 0.06  # at the default speech speed (about 150 words/min)
+    """The mock's timing and start values. The fields that are mock_qt_robot options take their
+    defaults from :class:`~qt_controller.config.MockQtRobotConfig` (declared once there):
+    build one with :meth:`defaults` or ``MockQtRobotConfig.settings(MockConfig)``."""
+
+    speech_seconds_per_char: float  # at the default speech speed (about 150 words/min)
+    emotion_seconds: float
+    max_joint_speed: float  # degrees/s at 100 % velocity
+    default_velocity: float  # percent
+    default_volume: int
+    gesture_busy_policy: str
     default_speech_pitch: int = 140
     default_speech_speed: int = 80
     default_language: str = "en-US"
-    emotion_seconds: float = 3.0
-    max_joint_speed: float = 120.0  # degrees/s at 100 % velocity
-    default_velocity: float = 50.0  # percent
-    default_volume: int = 50
-    gesture_busy_policy: str = "interrupt"
+
+    @classmethod
+    def defaults(cls, **changes: Any) -> MockConfig:
+        """The node's defaults (its options' declared defaults), with ``changes``."""
+        return MockQtRobotConfig().settings(cls, **changes)
 
     def __post_init__(self) -> None:
         if self.gesture_busy_policy not in ("interrupt", "refuse"):
@@ -104,7 +114,7 @@ class MockRobot:
         self.clock = clock
         self.gestures = gestures
         self.emotions = emotions or EmotionCatalogue()
-        self.config = config or MockConfig()
+        self.config = config or MockConfig.defaults()
         self.limits = limits or JointLimits.default()
         self.positions: dict[str, float] = {j: HOME[j] for j in ALL_JOINTS}
         self.targets: dict[str, float] = dict(self.positions)

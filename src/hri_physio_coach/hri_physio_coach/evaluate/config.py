@@ -5,7 +5,7 @@ from __future__ import annotations
 from pydantic import model_validator
 
 from hri_physio_bridge.config import NodeConfig, option
-from hri_physio_coach.policies import POLICY_NAMES
+from hri_physio_coach.policies.registry import POLICY_NAMES
 
 DEFAULT_POLICIES = ["static", "threshold", "fuzzy", "predictive"]
 

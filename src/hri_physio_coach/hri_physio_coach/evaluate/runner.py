@@ -20,7 +20,8 @@ from hri_physio_coach.config import CoachConfig
 from hri_physio_coach.evaluate.metrics import phase_spans, session_metrics
 from hri_physio_coach.evaluate.reach import reach
 from hri_physio_coach.evaluate.simulation import SessionSpec, coach_config, session_routine, simulate_session
-from hri_physio_coach.policies import StaticPolicy, make_policy
+from hri_physio_coach.policies.registry import make_policy
+from hri_physio_coach.policies.simple import StaticPolicy
 
 #: Sessions per task sent to a worker: large enough to hide the hand-over, small enough to balance.
 CHUNK = 8

@@ -4,7 +4,7 @@ What it does, and the facts about exercising hearts it rests on:
 
 * Heart rate lags demand by about a minute, so the mean of the last 30 s says little about
   where it is going. The policy fits a lagged response to every rule update's mean
-  (:class:`~hri_physio_coach.response_model.ResponseModel`) and acts on the *predicted
+  (:class:`~hri_physio_coach.policies.response_model.ResponseModel`) and acts on the *predicted
   steady state* of the current setting, not on the last mean.
 * Tempo and gesture speed move demand only a little; the activity moves it a lot (marching
   vs stepping is about a factor of two). So the policy uses both controls: the activity
@@ -32,16 +32,17 @@ import math
 from collections.abc import Hashable
 from dataclasses import dataclass
 
-from hri_physio_coach.policies import (
+from hri_physio_coach.policies.response_model import ResponseFit, ResponseModel
+from hri_physio_coach.policies.types import (
     CONDITIONING,
     COOL_DOWN,
     FOLLOW_ROUTINE,
     WARM_UP,
+    BasePolicy,
     Controls,
     Proposal,
     RuleInput,
 )
-from hri_physio_coach.response_model import ResponseFit, ResponseModel
 
 #: The "level" of running the routine's own activities, slot by slot (its mix of costs).
 ROUTINE = "routine"
@@ -56,7 +57,7 @@ class Setting:
     index: int  # ladder step
 
 
-class PredictivePolicy:
+class PredictivePolicy(BasePolicy):
     """Acts on the predicted steady-state heart rate, with the activity and the ladder as controls."""
 
     name = "predictive"

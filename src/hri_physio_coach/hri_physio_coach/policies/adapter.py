@@ -1,205 +1,61 @@
-"""Adaptation policies: what a rule update does with the mean heart rate of the last 30 s.
+"""The :class:`Adapter`: any policy plus the thesis's proposed fixes, applied to the speed ladder.
 
-A *policy* is the core algorithm (thesis ch. 4) and only proposes a step on the speed
-ladder: ``threshold`` (Algorithm 1), ``fuzzy`` (Algorithm 2, seeded) or ``static`` (never
-adapts: the control condition). :class:`Adapter` wraps any policy with the thesis's
-proposed fixes (refractory period, conditioning-only adaptation, scheduled cool-down,
-warm-up speed-up cap), applies the step to the ladder within its limits, and returns a
-:class:`Decision` that says what happened and why, so a recording explains every update.
+The fixes (refractory period, conditioning-only adaptation, scheduled cool-down, warm-up
+speed-up cap) work with every policy; the adapter applies the policy's step to the ladder
+within its limits and returns a :class:`~hri_physio_coach.policies.types.Decision` that says
+what happened and why, so a recording explains every update.
 """
 
 from __future__ import annotations
 
 import math
-import random
-from dataclasses import asdict, dataclass
-from typing import Protocol
+from dataclasses import dataclass
 
 from hri_physio_coach import gates
 from hri_physio_coach.ladder import SpeedLadder
-from hri_physio_coach.zones import HeartRateZone, fuzzy_probability
-
-# Decision actions.
-SPEED_UP = "speed_up"
-SLOW_DOWN = "slow_down"
-ENCOURAGE = "encourage"  # the policy saw no reason to change pace
-HOLD = "hold"  # an option suppressed adaptation (refractory, phase restriction, cap)
-AT_LIMIT = "at_limit"  # the policy asked for a step beyond the end of the ladder
-SCHEDULED_SLOW_DOWN = "scheduled_slow_down"  # cool-down schedule
-GATED = "gated"  # no trustworthy heart rate: no update at all (decided by the coach)
-CHANGE_ACTIVITY = "change_activity"  # a policy that picks activities chose another one (maybe another step)
-#: A proposal's ``level`` that hands the choice of activity back to the routine (no cost is below 1 MET).
-FOLLOW_ROUTINE = 0.0
-OUT_OF_REACH = "out_of_reach"  # the zone cannot be reached with the controls at hand (said once)
+from hri_physio_coach.policies.types import (
+    AT_LIMIT,
+    CHANGE_ACTIVITY,
+    CONDITIONING,
+    COOL_DOWN,
+    ENCOURAGE,
+    FOLLOW_ROUTINE,
+    GATED,
+    HOLD,
+    OUT_OF_REACH,
+    SCHEDULED_SLOW_DOWN,
+    SLOW_DOWN,
+    SPEED_UP,
+    WARM_UP,
+    Controls,
+    Decision,
+    Policy,
+    Proposal,
+    RuleInput,
+)
 
 _UNCHANGED = object()  # a decision that did not change the activity cost
-
-# Phase kinds the options refer to.
-WARM_UP = "warm_up"
-CONDITIONING = "conditioning"
-COOL_DOWN = "cool_down"
-
-
-@dataclass(frozen=True)
-class Controls:
-    """What the participant is doing and what the coach may change (for policies that use it)."""
-
-    activity: str | None  # the activity being performed (the routine's, or the one run in its place)
-    mets: float | None  # its stated cost (None: the routine states none)
-    chosen: float | None  # the activity cost the policy holds (None: the routine's activities)
-    levels: tuple[float, ...]  # activity costs the coach can run (empty: no activity choice)
-    speeds: tuple[float, ...]  # the ladder's gesture speeds ...
-    tempos: tuple[float | None, ...]  # ... and music tempos
-    index: int  # the ladder step
-    window_start: float  # the rule update's HR mean covers (window_start, t]
-    # Per phase kind, the (duration, cost) of the routine's own activities that state a cost.
-    routine_costs: tuple[tuple[str, tuple[tuple[float, float], ...]], ...] = ()
-
-
-@dataclass(frozen=True)
-class RuleInput:
-    """What a rule update knows: the time, the buffer's mean HR, the zone and the phase."""
-
-    t: float
-    hr: float
-    zone: HeartRateZone
-    phase: str
-    phase_start: float
-    phase_end: float
-    controls: Controls | None = None
-
-
-@dataclass(frozen=True)
-class Proposal:
-    """A policy's proposal: a ladder step (-1, 0, +1) and why.
-
-    Policies that pick activities may also give the activity cost to run from now on
-    (``level``, METs) and a one-off ``notice`` (e.g. the zone is out of reach).
-    """
-
-    delta: int
-    reason: str
-    p: float | None = None
-    draw: float | None = None
-    level: float | None = None
-    notice: str | None = None
-
-
-class Policy(Protocol):
-    name: str
-
-    def propose(self, inp: RuleInput) -> Proposal: ...
-
-
-class ThresholdPolicy:
-    """Algorithm 1: below the zone speed up, above it slow down, inside it encourage."""
-
-    name = "threshold"
-
-    def propose(self, inp: RuleInput) -> Proposal:
-        zone = inp.zone
-        if inp.hr < zone.low:
-            return Proposal(+1, f"HR {inp.hr:.1f} < zone low {zone.low:.1f}")
-        if inp.hr > zone.high:
-            return Proposal(-1, f"HR {inp.hr:.1f} > zone high {zone.high:.1f}")
-        return Proposal(0, f"HR {inp.hr:.1f} within [{zone.low:.1f}, {zone.high:.1f}]")
-
-
-class FuzzyPolicy:
-    """Algorithm 2: adapt towards the zone centre with probability p(HR) (seeded draws)."""
-
-    name = "fuzzy"
-
-    def __init__(self, seed: int | None = 0) -> None:
-        self.rng = random.Random(seed)
-
-    @staticmethod
-    def probability(hr: float, zone: HeartRateZone) -> float:
-        """p(HR) of thesis Fig. 4.13."""
-        return fuzzy_probability(hr, zone)
-
-    def propose(self, inp: RuleInput) -> Proposal:
-        p = self.probability(inp.hr, inp.zone)
-        draw = self.rng.random()
-        target = inp.zone.target
-        if draw < p:
-            delta = 1 if inp.hr < target else -1
-            return Proposal(delta, f"draw {draw:.3f} < p {p:.3f} (HR {inp.hr:.1f}, target {target:.1f})",
-                            p, draw)
-        return Proposal(0, f"draw {draw:.3f} >= p {p:.3f} (HR {inp.hr:.1f}, target {target:.1f})", p, draw)
-
-
-class StaticPolicy:
-    """Never adapts: the control condition of the thesis's proposed study."""
-
-    name = "static"
-
-    def propose(self, inp: RuleInput) -> Proposal:
-        return Proposal(0, "static policy never adapts")
-
-
-POLICY_NAMES = ("threshold", "fuzzy", "static", "predictive")
-
-
-def make_policy(name: str, seed: int | None = 0) -> Policy:
-    """A policy by name (``threshold``, ``fuzzy``, ``static``, ``predictive``)."""
-    if name == "threshold":
-        return ThresholdPolicy()
-    if name == "fuzzy":
-        return FuzzyPolicy(seed)
-    if name == "static":
-        return StaticPolicy()
-    if name == "predictive":
-        from hri_physio_coach.predictive import PredictivePolicy  # it builds on this module's types
-
-        return PredictivePolicy()
-    raise ValueError(f"unknown adaptation policy {name!r}; choose one of {', '.join(POLICY_NAMES)}")
 
 
 @dataclass(frozen=True)
 class AdapterOptions:
-    """The thesis's proposed fixes, usable with any policy (all off by default = the thesis run)."""
+    """The thesis's proposed fixes, usable with any policy (all off by default = the thesis run).
 
-    refractory: bool = False
-    refractory_period: float = 60.0
+    The coach builds them from its ``adapt_*`` options (:meth:`CoachConfig.adapter_options`), where
+    their defaults are declared.
+    """
+
+    refractory_period: float | None = None  # None: no refractory period
     conditioning_only: bool = False
     cooldown_schedule: bool = False
     warmup_max_speedups: int | None = None  # None: no cap
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.refractory_period) and self.refractory_period >= 0):
+        period = self.refractory_period
+        if period is not None and not (math.isfinite(period) and period >= 0):
             raise ValueError(f"refractory period must be >= 0 s, got {self.refractory_period}")
         if self.warmup_max_speedups is not None and self.warmup_max_speedups < 0:
             raise ValueError(f"warm-up speed-up cap must be >= 0 (or none), got {self.warmup_max_speedups}")
-
-
-@dataclass(frozen=True)
-class Decision:
-    """The outcome of one rule update."""
-
-    t: float
-    policy: str
-    action: str
-    delta: int  # applied step
-    proposed: int  # the policy's proposal (0 when it was not consulted)
-    reason: str
-    hr: float | None
-    zone_state: str | None
-    index_before: int
-    index_after: int
-    p: float | None = None
-    draw: float | None = None
-    gate: str | None = None  # gated or held: why, as a code of hri_physio_coach.gates
-    level_before: float | None = None  # activity cost held by the policy (None: the routine's)
-    level_after: float | None = None
-    notice: str | None = None
-
-    @property
-    def changed(self) -> bool:
-        return self.delta != 0 or self.level_before != self.level_after
-
-    def as_dict(self) -> dict[str, object]:
-        return {**asdict(self), "changed": self.changed}
 
 
 class Adapter:
@@ -217,13 +73,11 @@ class Adapter:
     @property
     def chooses_activity(self) -> bool:
         """True when the policy may run other activities of the routine in place of the routine's own."""
-        return bool(getattr(self.policy, "chooses_activity", False))
+        return self.policy.chooses_activity
 
     def observe(self, t: float, controls: Controls) -> None:
         """What is performed from ``t`` on (activity start or switch, ladder step), for learning policies."""
-        observe = getattr(self.policy, "observe", None)
-        if observe is not None:
-            observe(t, controls)
+        self.policy.observe(t, controls)
 
     def _decision(self, inp: RuleInput | None, t: float, action: str, reason: str, before: int,
                   proposal: Proposal | None = None, gate: str | None = None,
@@ -241,8 +95,7 @@ class Adapter:
 
     def plan(self, inp: RuleInput) -> Decision | None:
         """At a phase start, what a policy that plans phases wants for it (None: nothing changes)."""
-        plan = getattr(self.policy, "plan", None)
-        proposal = plan(inp) if plan is not None else None
+        proposal = self.policy.plan(inp)
         if proposal is None:
             return None
         before, level_before = self.ladder.index, self.level
@@ -273,7 +126,7 @@ class Adapter:
         if opts.conditioning_only and inp.phase != CONDITIONING:
             reason = f"adaptation restricted to conditioning (phase {inp.phase})"
             return self._decision(inp, inp.t, HOLD, reason, before, gate=gates.CONDITIONING_ONLY)
-        if opts.refractory and self.last_adaptation is not None:
+        if opts.refractory_period is not None and self.last_adaptation is not None:
             since = inp.t - self.last_adaptation
             if since < opts.refractory_period:
                 return self._decision(
