@@ -23,7 +23,6 @@ from __future__ import annotations
 import json
 import sys
 import threading
-from collections import Counter
 from typing import Any
 
 from rclpy.duration import Duration
@@ -39,34 +38,19 @@ from hri_physio_bridge.node_runner import ManagedNode, run_node
 from hri_physio_bridge.qos import command_qos, event_qos, frame_qos, latched_qos
 from hri_physio_bridge.rate_limit import RateLimitedLog
 from hri_physio_bridge.ros_frames import msg_to_frame
-from hri_physio_coach.coach import CoachError, ExerciseCoach, session_start_time
+from hri_physio_coach.coach import CoachError, ExerciseCoach
 from hri_physio_coach.config import COACH_NODE, CoachNodeConfig
 from hri_physio_coach.conflicts import SECOND_CLOCK, SECOND_COACH, EchoFilter, SourceWatch
+from hri_physio_coach.control import START_WORDS, STOP_WORDS, Control, SessionControl
 from hri_physio_coach.paths import default_config_file
 from hri_physio_coach.routine import RoutineError
 
 PROG = COACH_NODE
-HR_CHANNELS = ("hr", "bpm", "heart_rate")
-FLAG_CHANNEL = "flag"
 #: The name the graph gives an endpoint whose node it does not know (yet, or any more): rmw_dds_common's.
 UNKNOWN_NODE_NAME = "_NODE_NAME_UNKNOWN_"
-START_WORDS, STOP_WORDS = ("start",), ("stop", "exit")
 # Events worth a line in the ROS log (all of them go to /coach/events).
 _LOGGED = {"session_start", "phase", "activity", "calibration", "zone", "rule_update", "hr_lost",
            "hr_resumed", "command_failed", "session_end", "session_stopped", "conflict"}
-
-
-def hr_samples(msg: Float64MultiArray) -> list[tuple[float, float, bool]]:
-    """(source time, bpm, flagged) of every sample of an HR frame (DESIGN.md layout)."""
-    frame = msg_to_frame(msg)
-    names = [c.lower() for c in frame.channels]
-    column = next((names.index(n) for n in HR_CHANNELS if n in names), 0)
-    flag = names.index(FLAG_CHANNEL) if FLAG_CHANNEL in names else None
-    out = []
-    for i in range(frame.num_samples):
-        flagged = flag is not None and float(frame.values[i, flag]) != 0.0
-        out.append((float(frame.timestamps[i]), float(frame.values[i, column]), flagged))
-    return out
 
 
 def _gid(info: MessageInfo) -> bytes | None:
@@ -86,18 +70,15 @@ class QtPhysioCoachNode(ManagedNode):
         self.config = cfg = self.declare_config(config)
         self._lock = threading.RLock()
         self._wake = threading.Event()
-        self._start_requested = False
-        self._start_at: float | None = None  # the whole second the session starts at
-        self._stop_reason: str | None = None
         self._state_dirty = True
         self.conflict: dict[str, Any] | None = None
-        self.control: Counter[str] = Counter(received=0, unknown=0)
         self._control_log = RateLimitedLog(self.get_logger().warning)
         self._own_events = EchoFilter()
         self._own_commands = EchoFilter()
         self._clocks = SourceWatch()
         self._coach_nodes: dict[bytes, str | None] = {}  # command publisher -> its node, if a coach
         self.coach = ExerciseCoach(cfg, self._now, self._send, self._on_event)
+        self.control = SessionControl(self.coach, cfg.interactive)
         self.commands = self.create_publisher(String, cfg.command_topic, command_qos())
         self.events = self.create_publisher(String, cfg.events_topic, event_qos())
         self.state_pub = self.create_publisher(String, cfg.state_topic, latched_qos())
@@ -145,7 +126,7 @@ class QtPhysioCoachNode(ManagedNode):
 
     def state(self) -> dict[str, Any]:
         """The coach's state plus the node's: control lines handled and any conflict found."""
-        return {**self.coach.state(), "control": dict(self.control),
+        return {**self.coach.state(), "control": dict(self.control.counts),
                 "conflict": self.conflict["conflict"] if self.conflict else None}
 
     def _finish(self) -> None:
@@ -155,14 +136,12 @@ class QtPhysioCoachNode(ManagedNode):
     # --- inputs ------------------------------------------------------------------------------
     def _on_hr(self, msg: Float64MultiArray) -> None:
         try:
-            samples = hr_samples(msg)
+            frame = msg_to_frame(msg)
         except FrameFormatError as exc:
             self.get_logger().warning(f"ignoring a malformed HR frame: {exc}")
             return
         with self._lock:
-            now = self._now()
-            for source_t, bpm, flagged in samples:
-                self.coach.on_hr(bpm, now=now, flagged=flagged, source_t=source_t)
+            self.control.on_hr(frame, self._now())
 
     def _on_reply(self, msg: String) -> None:
         try:
@@ -179,18 +158,12 @@ class QtPhysioCoachNode(ManagedNode):
 
     def request(self, line: str) -> None:
         """One control line from the control topic or stdin: ``start``, or ``stop``/``exit``."""
-        word = line.strip().lower()
         with self._lock:
-            self.control["received"] += 1
+            control = self.control.request(line)
             self._state_dirty = True
-            if word in START_WORDS:
-                self._start_requested = True
-            elif word in STOP_WORDS:
-                self._stop_reason = self._stop_reason or f"{word} requested"
-                self.coach.stop(self._stop_reason)  # nothing to stop before the start
+            if control is Control.STOP:
                 self._finish()
-            else:
-                self.control["unknown"] += 1
+            elif control is Control.UNKNOWN:
                 self._control_log.report("unknown", f"unknown control line {line.strip()[:60]!r} "
                                          f"(known: {', '.join(START_WORDS + STOP_WORDS)})",
                                          "unknown control line(s)")
@@ -258,24 +231,16 @@ class QtPhysioCoachNode(ManagedNode):
             self.conflict = {"conflict": kind, "topic": topic, "publishers": others, "reason": reason}
             self._on_event({"t": self._now(), "event": "conflict", "participant": self.coach.participant,
                             **self.conflict})
-            self.coach.stop(f"conflict: {kind}")
+            self.control.stop(f"conflict: {kind}")
             self._publish_state()
             self._finish()
 
     # --- the session -------------------------------------------------------------------------
     def _tick(self) -> None:
         with self._lock:
-            now = self._now()
-            coach = self.coach
-            if now > 0.0 and not self.finished:  # sim time without /clock yet: wait
-                if not coach.started and (self._start_requested or not self.config.interactive):
-                    if self._start_at is None:
-                        self._start_at = session_start_time(now)
-                    if now >= self._start_at:
-                        coach.start(self._start_at)
-                if coach.started:
-                    coach.tick(now)
-                if coach.finished:
+            if not self.finished:
+                self.control.tick(self._now())
+                if self.control.finished:
                     self._finish()
             if self._state_dirty:
                 self._publish_state()
@@ -286,7 +251,8 @@ class QtPhysioCoachNode(ManagedNode):
 
     def on_stop(self, signal_name: str) -> None:
         self.get_logger().info(f"{signal_name} received: stopping the session")
-        self._stop_reason = self._stop_reason or "signal"
+        with self._lock:
+            self.control.stop_reason = self.control.stop_reason or "signal"
         self._wake.set()
 
     def run(self, stop: threading.Event) -> int:
@@ -295,10 +261,8 @@ class QtPhysioCoachNode(ManagedNode):
         while not self._wake.wait(1.0) and not stop.is_set():
             pass
         with self._lock:
-            if self.coach.started and not self.coach.finished:
-                self.coach.stop(self._stop_reason or "signal")
+            state = self.control.end()
             self._publish_state()
-            state = self.coach.engine.state
         self.flush()
         log = self.get_logger()
         if self.conflict is not None:
