@@ -1,49 +1,50 @@
-"""Test-session isolation: own ROS domain (claimed), own LSL stream names, localhost only.
+"""Test-process isolation and tiers.
 
-The environment is fixed at import time, before any test imports rclpy, so
-every node and every subprocess of this session sees the same settings.
+Isolation: each test process (the main one, or each pytest-xdist worker) claims a ROS domain of
+its own, prefixes its LSL stream names with a tag of its own and stays on this machine. The
+environment is fixed at import time, before any test imports rclpy, so every node and every
+subprocess of this process sees the same settings.
+
+Tiers: a test's tier is its path. ``tests/<package>/unit/`` holds logic tests (no ROS, LSL or
+node processes); ``tests/<package>/integration/`` tests real nodes, rclpy and pylsl, and its
+tests are marked ``integration`` here (``scripts/test --fast`` leaves them out).
 """
 
 from __future__ import annotations
 
-import fcntl
 import os
-import random
 import sys
 import tempfile
 import uuid
+from datetime import datetime
 from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # tests/helpers.py
+from hri_physio_bringup.isolation import DomainClaim, claim_domain, holder_info
+
+TESTS = Path(__file__).resolve().parent
+ROOT = TESTS.parent
+sys.path.insert(0, str(TESTS))  # the helpers package
 VENV = Path(sys.prefix)
 
 
 
-def _claim_domain_id() -> int:
-    """A ROS domain no other test session on this machine holds (1-101; 0 is a live system's default).
+def _claim_domain() -> DomainClaim:
+    """A ROS domain no other session or test run on this machine holds (1-101; 0 is a live system's default).
 
-    Always chosen here, never inherited: tests must not talk to a system the user is running.
-    The claim is an flock on a file in the temp dir, released when this process exits.
+    Always chosen here, never inherited: tests must not talk to a system the user is running. The
+    claim is the sessions' own (``hri_physio_bringup.isolation``), held until this process exits, so
+    sessions and test runs (each pytest-xdist worker is one) never pick each other's domain.
     """
-    ids = list(range(1, 102))
-    random.SystemRandom().shuffle(ids)
-    for domain in ids:
-        handle = open(Path(tempfile.gettempdir()) / f"hri_physio_test_domain_{domain}.lock", "w")  # noqa: SIM115
-        try:
-            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            handle.close()
-            continue
-        _DOMAIN_LOCKS.append(handle)  # keep it open (and locked) for the whole session
-        return domain
-    raise RuntimeError("every ROS domain 1-101 is held by another test session on this machine")
+    info = holder_info(Path(tempfile.gettempdir()), datetime.now().isoformat(timespec="seconds"),
+                       role=f"test run ({os.environ.get('PYTEST_XDIST_WORKER', 'main')})")
+    return claim_domain(None, info)
 
 
-_DOMAIN_LOCKS: list = []
-os.environ["ROS_DOMAIN_ID"] = str(_claim_domain_id())
+#: Held (locked) for the whole test process.
+DOMAIN = _claim_domain()
+os.environ["ROS_DOMAIN_ID"] = str(DOMAIN.domain)
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
 if str(VENV) not in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
@@ -53,7 +54,7 @@ if str(VENV) not in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
 os.environ.setdefault("LSLAPICFG", str(ROOT / "config" / "lsl_api.cfg"))
 os.environ["PYTHONUNBUFFERED"] = "1"
 
-#: Unique per test session: prefix every LSL stream name with it.
+#: Unique per test process: prefix every LSL stream name with it.
 SESSION_TAG = uuid.uuid4().hex[:8]
 
 
@@ -80,6 +81,13 @@ def ros_context():
     finally:
         if context.ok():
             rclpy.shutdown(context=context)
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """The tier is the path: everything under an ``integration`` folder is marked ``integration``."""
+    for item in items:
+        if "integration" in item.path.relative_to(TESTS).parts:
+            item.add_marker(pytest.mark.integration)
 
 
 def venv_bin(name: str) -> str:

@@ -1,0 +1,466 @@
+"""hri_physio_session: the whole closed loop on the built-in defaults, with no hardware.
+
+Starts, as separate processes (the console scripts a lab would run):
+
+* ``simulated_participant`` - a person on the step wearing a simulated Polar H10 (ECG, HR and
+  RR on LSL), whose heart rate follows the robot's gesture speed and music tempo;
+* ``physio_receiver`` x2 - LSL -> ROS 2 for HR (``/physio/polar_h10/hr``) and ECG;
+* ``neurokit_processor`` - ECG -> HR/HRV features (``/physio/polar_h10/ecg/...``);
+* ``qt_physio_coach`` - the exercise coach, adapting on the strap's HR (or the processor's);
+* ``qt_controller`` + ``mock_qt_robot`` - the robot side;
+* ``audio_streamer`` + ``video_streamer`` - the music (null sink unless ``--audio-sink device``) and
+  the reference videos (offscreen), on the session's clock, their status and preview in the bag;
+* ``physio_recorder`` - every topic into a rosbag2 (MCAP) directory.
+
+Every node's configuration is checked before anything starts. The session gets a folder of its
+own, ``<out>/<participant id>_<date-time>/`` (bag, ``logs/<node>.log``, ``configs/<node>.yaml``,
+``summary.json``, the report), a ROS domain of its own (claimed, so two sessions on one machine
+never mix) and LSL stream names of its own. This process drives ``/clock`` (every node but the
+receivers, processor and recorder runs on sim time), so the 23-minute routine runs ``--speed``
+times faster than real time. It waits until the robot side is up and heart rate reaches the
+coach's input, sends ``start`` to the coach, shows one live progress display (plain lines when
+the output is not a terminal; every node line with ``--verbose``), and when the coach ends the
+session stops every process cleanly (the recorder last), prints a summary and the folder.
+
+``--source polar:<device id>`` puts a real Polar H10 in the simulated participant's place
+(``polar_streamer``; real time only), ``--source polar-replay:<capture>`` a capture of one.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import math
+import os
+import signal
+import sys
+import threading
+import time
+import traceback
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from datetime import datetime
+from typing import Any
+
+from hri_physio_bridge import topics
+from hri_physio_bridge.config import ConfigError, OneLineErrorParser, add_config_arguments, given_options
+from hri_physio_bridge.launcher import ManagedProcess, ProcessGroup
+from hri_physio_bridge.ros_tools import BackgroundNode, clock_message
+from hri_physio_bridge.stop_signals import install_stop_handlers
+from hri_physio_bridge.waiting import wait_until
+from hri_physio_bringup.console import (
+    LiveConsole,
+    PlainConsole,
+    Progress,
+    SessionConsole,
+    VerboseConsole,
+)
+from hri_physio_bringup.folder import SessionFolder
+from hri_physio_bringup.isolation import (
+    DomainClaim,
+    DomainInUse,
+    claim_domain,
+    holder_info,
+    new_device_id,
+    parse_domain,
+)
+from hri_physio_bringup.options import PROG, SessionConfig
+from hri_physio_bringup.plan import (
+    COACH,
+    SessionPlan,
+    coach_config,
+    plan_session,
+)
+from hri_physio_bringup.view import SessionView, SimClock, overdue, session_counts, summary
+
+#: Session seconds past the routine's end after which a coach that has not ended is stopped.
+END_MARGIN = 60.0
+#: Session seconds the clock runs on after the coach's end: the robot's last speech, the last events.
+TAIL = 10.0
+#: Wall seconds the system must look ready before 'start': publishers match their subscribers.
+SETTLE = 2.0
+CLOCK_DEPTH = 1000
+
+
+class ClockAndWatcher(BackgroundNode):
+    """Publishes /clock and watches the session's topics, on its own executor thread."""
+
+    def __init__(self, view: SessionView, hr_topic: str, receivers: list[str],
+                 listeners: tuple[tuple[str, str], ...]) -> None:
+        from rosgraph_msgs.msg import Clock
+        from std_msgs.msg import Float64MultiArray, String
+
+        from hri_physio_bridge.qos import command_qos, event_qos, frame_qos, latched_qos
+        from hri_physio_bridge.ros_frames import msg_to_frame
+
+        super().__init__("session_launcher")
+        self._string_cls = String
+        self.view = view
+        self.listeners = listeners
+        self.lock = threading.Lock()
+        self.sim_now = math.nan  # the last /clock published: what sim time it is when a sample arrives
+        # Deep: at high --speed hundreds of clock messages a second must reach the recorder too.
+        self.clock_pub = self.node.create_publisher(Clock, "/clock", CLOCK_DEPTH)
+        self.control_pub = self.node.create_publisher(String, topics.COACH_CONTROL, command_qos())
+        strap = hr_topic == topics.POLAR_H10_HR
+
+        def on_hr(msg: Float64MultiArray) -> None:
+            frame = msg_to_frame(msg)
+            with self.lock:
+                for t, bpm in zip(frame.timestamps, frame.values[:, -1], strict=True):
+                    view.on_hr(float(bpm), float(t), self.sim_now)
+                if strap:
+                    view.strap_samples += frame.num_samples
+
+        def on_strap(msg: Float64MultiArray) -> None:
+            with self.lock:
+                view.strap_samples += msg_to_frame(msg).num_samples
+
+        def on_json(apply: Callable[[dict], None]) -> Callable[[String], None]:
+            def callback(msg: String) -> None:
+                try:
+                    data = json.loads(msg.data)
+                except ValueError:
+                    return  # not ours to judge: the recorder keeps the raw message
+                if isinstance(data, dict):
+                    with self.lock:
+                        apply(data)
+            return callback
+
+        def on_event(msg: String) -> None:
+            with self.lock:
+                view.on_event_text(msg.data)
+
+        def set_state(data: dict) -> None:
+            view.state = data
+
+        def set_model(data: dict) -> None:
+            view.model_hr = float(data.get("hr_model", math.nan))
+
+        def count_action(_data: dict) -> None:
+            view.robot_actions += 1
+
+        def receiver_status(node: str) -> Callable[[dict], None]:
+            return lambda data: view.receivers.__setitem__(node, data)
+
+        self.node.create_subscription(Float64MultiArray, hr_topic, on_hr, frame_qos())
+        if not strap:
+            self.node.create_subscription(Float64MultiArray, topics.POLAR_H10_HR, on_strap, frame_qos())
+        self.node.create_subscription(String, topics.COACH_STATE, on_json(set_state), latched_qos())
+        self.node.create_subscription(String, topics.COACH_EVENTS, on_event, event_qos())
+        self.node.create_subscription(String, topics.PARTICIPANT_STATE, on_json(set_model), event_qos(100))
+        self.node.create_subscription(String, topics.QT_MOCK_EVENTS, on_json(count_action), event_qos())
+        for node in receivers:
+            self.node.create_subscription(String, f"/{node}/status", on_json(receiver_status(node)), 10)
+        self.start()
+
+    def publish_clock(self, t: float) -> None:
+        self.clock_pub.publish(clock_message(t))
+        self.sim_now = t
+
+    def send_start(self) -> None:
+        self.control_pub.publish(self._string_cls(data="start"))
+
+    def subscriber_nodes(self, topic: str) -> set[str]:
+        return {info.node_name for info in self.node.get_subscriptions_info_by_topic(topic)}
+
+    def robot_side_ready(self) -> bool:
+        """Every node listens where the plan says: the controller (and a simulated participant) to the
+        robot commands, the coach to its control topic, the mock robot to the speech, the streamers to
+        their requests (a request published before its subscriber exists would be lost)."""
+        return all(node in self.subscriber_nodes(topic) for topic, node in self.listeners)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = OneLineErrorParser(
+        prog=PROG, formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="The closed loop on the built-in defaults: simulated participant (Polar H10 on LSL) -> "
+        "physio_receiver -> qt_physio_coach -> qt_controller -> mock_qt_robot, recorded to a bag, in a "
+        "session folder of its own (bag, logs/, configs/, summary.json, report).",
+        epilog="Examples: hri_physio_session  |  hri_physio_session --speed 1 --policy fuzzy  |  "
+        "hri_physio_session --routine my_routine.yaml --out /data/study1\n\n"
+        "Isolation: the session claims a ROS domain of its own (a free one, printed at the start; or "
+        "ROS_DOMAIN_ID if you export it, refused while another session holds it) and LSL stream names "
+        "of its own (--device-id).",
+    )
+    add_config_arguments(p, SessionConfig)
+    for group in p._action_groups:  # the launcher's options are not ROS parameters
+        if group.title and group.title.startswith("options (also"):
+            group.title = "session options"
+    return p
+
+
+@dataclass
+class Outcome:
+    """How the run went: what the exit status and summary.json say."""
+
+    code: int = 0
+    problem: str | None = None
+    stopped_by: str | None = None
+    wall: float = 0.0
+    node_codes: dict[str, int] = field(default_factory=dict)
+
+    def fail(self, problem: str, code: int = 1) -> None:
+        if self.problem is None:
+            self.problem, self.code = problem, code
+
+
+def make_console(options: SessionConfig, title: str) -> SessionConsole:
+    if options.verbose:
+        return VerboseConsole(sys.stdout, options.progress_every)
+    if sys.stdout.isatty():
+        return LiveConsole(title)
+    return PlainConsole(sys.stdout, options.progress_every)
+
+
+def start_nodes(group: ProcessGroup, plan: SessionPlan, folder: SessionFolder) -> None:
+    for node in plan.nodes:
+        conf = folder.write_config(node.name, node.config_yaml())
+        group.start(node.name, node.script, node.argv(conf), echo=False, log_path=folder.log_file(node.name))
+
+
+def wait_for_system(watcher: ClockAndWatcher, group: ProcessGroup, clock: SimClock, view: SessionView,
+                    stop: threading.Event, timeout: float) -> str | None:
+    """Drive the clock until the robot side listens and heart rate reaches the coach's input."""
+    ready_since: list[float] = []
+    dead: list[ManagedProcess] = []
+
+    def ready() -> bool:
+        for t in clock.due_steps():
+            watcher.publish_clock(t)
+        dead[:] = [p for p in group.procs if p.returncode is not None]
+        if dead:
+            return True
+        with watcher.lock:
+            # The strap's HR proves LSL -> ROS 2; the coach's own input must flow too (the
+            # processor's first HR needs a full window of ECG).
+            hr_flowing = view.strap_samples >= 2 and view.hr_seen >= 1
+        if hr_flowing and watcher.robot_side_ready():
+            ready_since[:] = ready_since or [time.monotonic()]
+            return time.monotonic() - ready_since[0] >= SETTLE
+        return False
+
+    if wait_until(ready, timeout, stop=stop, poll=0.02):
+        if dead:
+            p = dead[0]
+            return f"{p.name} exited during start-up with status {p.returncode}: {p.error_line()}"
+        return None
+    if stop.is_set():
+        return "interrupted during start-up"
+    with watcher.lock:
+        strap = view.strap_samples
+    return (f"the system was not ready after {timeout:g} s (strap heart-rate samples on ROS 2: {strap}; "
+            f"robot side listening: {watcher.robot_side_ready()}); see the folder's logs/")
+
+
+def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder, console: SessionConsole,
+                view: SessionView, group: ProcessGroup, stop: threading.Event, out: Outcome) -> SimClock:
+    """Start the nodes, wait for them, run the routine to its end (or a stop); returns the sim clock."""
+    receivers = [n.name for n in plan.nodes if n.script == "physio_receiver"]
+    watcher = ClockAndWatcher(view, plan.hr_topic, receivers, plan.listeners)
+    # The clock runs at --speed from the beginning: before 'start' the participant sits and the
+    # processor fills its first window (60 s of ECG) without keeping the launcher waiting.
+    clock = SimClock(start=float(int(time.time())), speed=options.speed)
+    try:
+        start_nodes(group, plan, folder)
+        problem = wait_for_system(watcher, group, clock, view, stop, options.startup_timeout)
+        if problem:
+            out.fail(problem)
+            return clock
+        coach = next(p for p in group.procs if p.name == COACH)
+        watcher.send_start()
+        wall0 = time.monotonic()
+        console.say(f"[session] system ready: session started at {options.speed:g}x")
+
+        def finished() -> bool:
+            for t in clock.due_steps():
+                watcher.publish_clock(t)
+            dead = [p for p in group.procs if p.returncode is not None and p is not coach]
+            if dead:
+                p = dead[0]
+                out.fail(f"{p.name} exited early with status {p.returncode}: {p.error_line()}")
+                return True
+            with watcher.lock:
+                wall = time.monotonic() - wall0
+                progress = Progress.of(view, clock.t, plan.routine_duration, None)
+                if progress.elapsed and wall > 0:
+                    progress = Progress.of(view, clock.t, plan.routine_duration, progress.elapsed / wall)
+                late = overdue(view, clock.t, plan.routine_duration, END_MARGIN)
+            console.progress(progress)
+            if late:
+                out.fail(f"the coach did not end its session {END_MARGIN:g} s after the routine's end")
+                return True
+            return coach.returncode is not None
+
+        wait_until(finished, None, stop=stop, poll=0.01)
+        out.wall = time.monotonic() - wall0
+        if coach.returncode not in (None, 0):
+            out.fail(f"{COACH} ended with status {coach.returncode}: {coach.error_line()}")
+        elif coach.returncode == 0:
+            # Let the robot finish its last speech and the last events reach us.
+            end = clock.t + TAIL
+
+            def tail_done() -> bool:
+                for t in clock.due_steps():
+                    watcher.publish_clock(t)
+                return clock.t >= end
+
+            wait_until(tail_done, None, stop=stop, poll=0.01)
+        return clock
+    finally:
+        if out.stopped_by:
+            console.say(f"{out.stopped_by}: stopping the session")
+        out.node_codes = group.stop()
+        watcher.close()
+
+
+def _write_report(folder: SessionFolder) -> list[str]:
+    """The session's report (hri_physio_report) into its folder; the names of the files written."""
+    from hri_physio_coach.report import make_report
+
+    result = make_report(folder.path)
+    return [p.name for p in result.files.values()]
+
+
+def _report(folder: SessionFolder, console: SessionConsole) -> list[str] | None:
+    # A second Ctrl-C may end the report (the session's data is safe by now).
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        files = _write_report(folder)
+    except KeyboardInterrupt:
+        console.say(f"{PROG}: warning: report interrupted (hri_physio_report {folder.display()} writes it)")
+        return None
+    except Exception as exc:  # the report must not cost the session's exit status: say it in one line
+        (folder.path / "logs").mkdir(exist_ok=True)
+        (folder.path / "logs" / "report.log").write_text(traceback.format_exc(), encoding="utf-8")
+        first = str(exc).splitlines()[0] if str(exc) else ""
+        console.say(f"{PROG}: warning: no report ({type(exc).__name__}: {first}; details in logs/report.log)")
+        return None
+    console.say(f"[session] report: {', '.join(files)}")
+    return files
+
+
+def _summary_json(options: SessionConfig, plan: SessionPlan, folder: SessionFolder, claim: DomainClaim,
+                  started: datetime, view: SessionView, out: Outcome, group: ProcessGroup,
+                  clock: SimClock | None, report: list[str] | None, running: bool = False) -> dict[str, Any]:
+    procs = {p.name: p for p in group.procs}
+    counts = session_counts(view)
+    if running:
+        outcome = "running"
+    elif view.conflict or out.code == 0:
+        outcome = counts["outcome"]  # finished, stopped (a signal), not started, conflict
+    else:
+        outcome = "failed"
+    return {
+        "participant": plan.coach.participant,
+        "folder": str(folder.path.resolve()),
+        "started": started.isoformat(timespec="seconds"),
+        "ended": None if running else datetime.now().isoformat(timespec="seconds"),
+        "outcome": outcome,
+        "exit_status": None if running else out.code,
+        "problem": out.problem,
+        "stopped_by": out.stopped_by,
+        "wall_seconds": round(out.wall, 3),
+        "speed": options.speed,
+        "sim_time_end": None if clock is None else clock.t,
+        "ros_domain": claim.domain,
+        "ros_domain_chosen": claim.chosen,
+        "lsl_device_id": plan.device_id,
+        "bag": None if options.no_record else folder.bag.name,
+        "options": options.model_dump(mode="json"),
+        "nodes": {
+            n.name: {"script": n.script, "config": f"configs/{n.name}.yaml", "log": f"logs/{n.name}.log",
+                     "argv": procs[n.name].argv[1:] if n.name in procs else None,
+                     "exit_status": out.node_codes.get(n.name)}
+            for n in plan.nodes
+        },
+        "session": counts,
+        "report": report,
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        options = SessionConfig.from_mapping(given_options(args, SessionConfig), "command line")
+        try:
+            requested = parse_domain(os.environ.get("ROS_DOMAIN_ID"))
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from None
+        coach = coach_config(options)
+        started = datetime.now()
+        device = options.device_id or new_device_id()
+        # Every node's configuration, checked before anything starts (on the folder it would get).
+        plan_session(options, SessionFolder.plan(options.out, coach.participant, started), device, coach)
+    except ConfigError as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr, flush=True)
+        return 2
+    folder = SessionFolder.plan(options.out, coach.participant, started)
+    try:
+        info = holder_info(folder.path.resolve(), started.isoformat(timespec="seconds"))
+        claim = claim_domain(requested, info)
+    except DomainInUse as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr, flush=True)
+        return 1
+    try:
+        os.environ["ROS_DOMAIN_ID"] = str(claim.domain)  # for this process's node and every child
+        for _ in range(100):
+            try:
+                folder.create()
+                break
+            except FileExistsError:  # the same participant started another session this second
+                folder = SessionFolder.plan(options.out, coach.participant, started)
+            except OSError as exc:
+                print(f"{PROG}: error: cannot create the session folder {folder.path}: {exc.strerror}",
+                      file=sys.stderr, flush=True)
+                return 1
+        plan = plan_session(options, folder, device, coach)
+        return _run(options, plan, folder, claim, started)
+    finally:
+        claim.release()
+
+
+def _run(options: SessionConfig, plan: SessionPlan, folder: SessionFolder, claim: DomainClaim,
+         started: datetime) -> int:
+    out = Outcome()
+    stop = install_stop_handlers(lambda name: setattr(out, "stopped_by", name))
+    console = make_console(options, f"HRI Physio session {plan.coach.participant}")
+    view = SessionView(warn=console.say)
+    group = ProcessGroup(on_line=console.node_line)
+    who = (f"Polar H10 {plan.device_id}" + (" (replayed capture)" if options.polar_replay else "")
+           if options.polar else f"simulated participant (age {options.age:g})")
+    console.say(f"HRI Physio session {plan.coach.participant}: {who} "
+                f"-> LSL -> ROS 2 -> coach ({plan.coach.policy}) -> mock QT robot, audio and video "
+                f"streamers, "
+                f"at {options.speed:g}x real time")
+    domain = (f"ROS domain {claim.domain} (export ROS_DOMAIN_ID={claim.domain} to watch it)" if claim.chosen
+              else f"ROS domain {claim.domain} (ROS_DOMAIN_ID)")
+    console.say(f"[session] folder {folder.display()}; {domain}; LSL streams PolarH10/{plan.device_id}/*")
+    folder.write_summary(_summary_json(options, plan, folder, claim, started, view, out, group, None, None,
+                                       running=True))
+    clock: SimClock | None = None
+    try:
+        clock = run_session(options, plan, folder, console, view, group, stop, out)
+    finally:
+        console.close()
+        bag = folder.bag if not options.no_record and folder.bag.exists() else None
+        now = None if clock is None else clock.t
+        console.say(summary(view, out.wall, str(bag) if bag else None, now=now))
+        bad = {name: c for name, c in out.node_codes.items() if c != 0}
+        if bad and out.code == 0:
+            out.fail(f"node exit statuses {bad}")
+        if not stop.is_set() and view.ended_at is None and out.code == 0:
+            out.fail("the session did not reach its end")
+        report = _report(folder, console) if bag is not None and not options.no_report else None
+        folder.write_summary(_summary_json(options, plan, folder, claim, started, view, out, group, clock,
+                                           report))
+        if out.problem:
+            print(f"{PROG}: error: {out.problem}", file=sys.stderr, flush=True)
+        console.say(f"[session] session folder: {folder.display()}")
+    return out.code
+
+
+if __name__ == "__main__":
+    with contextlib.suppress(KeyboardInterrupt):
+        sys.exit(main())

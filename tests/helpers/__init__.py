@@ -1,0 +1,173 @@
+"""Shared test helpers: where things are, waiting, node subprocesses, ROS 2 frame collectors.
+
+More specific helpers live beside this module (``helpers.bags``, ``helpers.processing``, ...).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+#: The repository, its tests' data and its packages' sources.
+ROOT = Path(__file__).resolve().parents[2]
+DATA = ROOT / "tests" / "data"
+SRC = ROOT / "src"
+
+
+def wait_until(predicate: Callable[[], bool], timeout: float, what: str | Callable[[], str],
+               period: float = 0.02) -> None:
+    """Poll ``predicate``; on timeout fail with ``what`` (a callable is evaluated then)."""
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            text = what() if callable(what) else what
+            raise AssertionError(f"timed out after {timeout:g} s waiting for {text}")
+        time.sleep(period)
+
+
+def publish_burst(publisher, messages, timeout: float = 60.0) -> None:
+    """Publish every message in order as fast as the reliable KEEP_ALL ``publisher`` takes them.
+
+    Fast DDS keeps at most 5000 unacknowledged samples per writer; a write that finds them all
+    still unacknowledged waits 100 ms and then fails ("cannot publish data"). A burst sender
+    that must lose nothing sends that same message again once the subscriber has caught up.
+    """
+    from rclpy.impl.implementation_singleton import rclpy_implementation
+
+    for msg in messages:
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                publisher.publish(msg)
+                break
+            except rclpy_implementation.RCLError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.01)
+
+
+def session_env(**extra: str) -> dict[str, str]:
+    """The environment for an ``hri_physio_session`` under test, plus ``extra``.
+
+    Without ``ROS_DOMAIN_ID``: the test process holds its own domain, so the session claims a free
+    one of its own (as it does for a user who exported none) and never shares the test's.
+    """
+    env = {k: v for k, v in os.environ.items() if k != "ROS_DOMAIN_ID"}
+    env.update(extra)
+    return env
+
+
+class NodeProcess:
+    """A console-script node in a subprocess, output captured to a file."""
+
+    def __init__(self, script: str, *args: str, stdin: int | None = subprocess.DEVNULL,
+                 env: dict[str, str] | None = None) -> None:
+        self.log_file = tempfile.NamedTemporaryFile("w+", suffix=f"-{script}.log", delete=False)  # noqa: SIM115
+        exe = str(Path(sys.prefix) / "bin" / script)
+        self.proc = subprocess.Popen(
+            [exe, *args], stdout=self.log_file, stderr=subprocess.STDOUT, stdin=stdin,
+            env=dict(os.environ) if env is None else env, text=True,
+        )
+        self._final_output: str | None = None
+
+    @property
+    def output(self) -> str:
+        if self._final_output is not None:
+            return self._final_output
+        return Path(self.log_file.name).read_text(errors="replace")
+
+    def wait_for_output(self, text: str, timeout: float = 20.0) -> None:
+        wait_until(lambda: text in self.output or self.proc.poll() is not None, timeout, repr(text))
+        assert text in self.output, f"process exited before printing {text!r}:\n{self.output}"
+
+    def stop(self, sig: int = signal.SIGTERM, timeout: float = 15.0) -> int:
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+        try:
+            return self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+            raise AssertionError(
+                f"process did not exit within {timeout} s after {sig}:\n{self.output}"
+            ) from None
+
+    def wait(self, timeout: float = 30.0) -> int:
+        try:
+            return self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            raise AssertionError(f"process still running after {timeout} s:\n{self.output}") from None
+
+    def __enter__(self) -> NodeProcess:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+        self._final_output = self.output
+        self.log_file.close()
+        os.unlink(self.log_file.name)
+
+
+#: Deeper than the nodes' 1000: a test's bursts must not outrun a collector slowed by CI load.
+COLLECTOR_DEPTH = 10_000
+
+
+class RosFrameCollector:
+    """An rclpy node on its own executor thread that collects decoded frames from topics."""
+
+    def __init__(self, context: object, name: str = "collector") -> None:
+        from rclpy.node import Node
+
+        from hri_physio_bridge.ros_tools import ExecutorThread
+
+        self.node = Node(name, context=context)
+        self.frames: dict[str, list] = {}
+        self._lock = threading.Lock()
+        self._spinner = ExecutorThread(self.node, context=context)
+
+    def subscribe_frames(self, topic: str) -> list:
+        from std_msgs.msg import Float64MultiArray
+
+        from hri_physio_bridge.qos import frame_qos
+        from hri_physio_bridge.ros_frames import msg_to_frame
+
+        got: list = self.frames.setdefault(topic, [])
+
+        def on_msg(msg: Float64MultiArray) -> None:
+            with self._lock:
+                got.append(msg_to_frame(msg))
+
+        self.node.create_subscription(Float64MultiArray, topic, on_msg, frame_qos(COLLECTOR_DEPTH))
+        return got
+
+    def publishers(self, topic: str) -> int:
+        return self.node.count_publishers(topic)
+
+    def close(self) -> None:
+        self._spinner.close()
+        self.node.destroy_node()
+
+
+def concat_new_samples(frames: list, frame_size: int, overlap: int) -> tuple[np.ndarray, np.ndarray]:
+    """Timestamps and values of every frame, minus the overlap each full frame repeats.
+
+    The receiver's last frame at shutdown is shorter and holds only new samples.
+    """
+    ts, vs = [], []
+    for i, f in enumerate(frames):
+        skip = overlap if i and f.num_samples == frame_size else 0
+        ts.append(f.timestamps[skip:])
+        vs.append(f.values[skip:])
+    return np.concatenate(ts), np.concatenate(vs)

@@ -1,0 +1,184 @@
+"""Helpers for the report tests: write session bags with the project's bag writer (no rclpy),
+read bags back with independent readers (rosbags' AnyReader, the mcap stream reader)."""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rosbags.typesys import Stores, get_typestore
+
+from helpers import DATA
+from hri_physio_bridge import topics
+from hri_physio_bridge.bag.msgdefs import installed_type_hash, message_definition
+from hri_physio_bridge.bag.writer import BagWriter
+
+TS = get_typestore(Stores.LATEST)
+DATA = DATA / "report"
+#: The real session bag shipped for these tests (tests/data/report/README.md says how it was made).
+REAL_BAG = DATA / "session_2026_11_23-18_53_14"
+_NEVER = {"sec": 9223372036, "nsec": 854775807}
+QOS = [{"history": "unknown", "depth": 0, "reliability": "reliable", "durability": "volatile",
+        "deadline": _NEVER, "lifespan": _NEVER, "liveliness": "automatic",
+        "liveliness_lease_duration": _NEVER, "avoid_ros_namespace_conventions": False}]
+
+
+def string_msg(text: str) -> Any:
+    return TS.types["std_msgs/msg/String"](data=text)
+
+
+def frame_msg(timestamps: np.ndarray, values: np.ndarray, channels: tuple[str, ...]) -> Any:
+    """A frame in the project's layout (column 0 = time), built by hand (not with frames.py)."""
+    values = np.asarray(values, dtype=np.float64).reshape(len(timestamps), -1)
+    table = np.column_stack([np.asarray(timestamps, dtype=np.float64), values])
+    n, width = table.shape
+    dim = TS.types["std_msgs/msg/MultiArrayDimension"]
+    layout = TS.types["std_msgs/msg/MultiArrayLayout"](
+        dim=[dim(label="samples", size=n, stride=n * width),
+             dim(label="channels:" + ",".join(("t", *channels)), size=width, stride=width)],
+        data_offset=0)
+    return TS.types["std_msgs/msg/Float64MultiArray"](layout=layout, data=table.ravel())
+
+
+def clock_msg(t: float) -> Any:
+    sec = math.floor(t)
+    return TS.types["rosgraph_msgs/msg/Clock"](
+        clock=TS.types["builtin_interfaces/msg/Time"](sec=sec, nanosec=round((t - sec) * 1e9)))
+
+
+def log_msg(name: str, text: str) -> Any:
+    return TS.types["rcl_interfaces/msg/Log"](
+        stamp=TS.types["builtin_interfaces/msg/Time"](sec=0, nanosec=0), level=20, name=name, msg=text,
+        file="x.py", function="f", line=1)
+
+
+@dataclass
+class BagBuilder:
+    """Messages to write, each with its receive time (ns); :meth:`write` makes the bag."""
+
+    messages: list[tuple[str, str, int, Any]] = field(default_factory=list)  # topic, type, ns, msg
+
+    def add(self, topic: str, type_name: str, log_ns: int, msg: Any) -> None:
+        self.messages.append((topic, type_name, int(log_ns), msg))
+
+    def event(self, log_ns: int, data: dict[str, Any], topic: str = topics.COACH_EVENTS) -> None:
+        self.add(topic, "std_msgs/msg/String", log_ns, string_msg(json.dumps(data)))
+
+    def write(self, bag_dir: Path) -> Path:
+        writer = BagWriter(bag_dir, custom_data={"session_id": "test"})
+        for topic, type_name, log_ns, msg in sorted(self.messages, key=lambda m: m[2]):
+            if topic not in writer.topics:
+                writer.add_topic(topic, type_name, message_definition(type_name),
+                                 installed_type_hash(type_name) or "", QOS)
+            writer.write(topic, log_ns, TS.serialize_cdr(msg, type_name))
+        writer.close()
+        return bag_dir
+
+
+def copy_real_bag(dest: Path) -> Path:
+    """A private copy of the shipped session bag (tests may damage it)."""
+    return Path(shutil.copytree(REAL_BAG, dest / REAL_BAG.name))
+
+
+# --- independent readers -------------------------------------------------------------------------
+def read_anyreader(bag: Path, wanted: set[str]) -> Iterator[tuple[str, int, Any]]:
+    """(topic, receive ns, message) with rosbags' own reader and the bag's own type definitions."""
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([bag], default_typestore=get_typestore(Stores.EMPTY)) as reader:
+        conns = [c for c in reader.connections if c.topic in wanted]
+        for conn, t, raw in reader.messages(connections=conns):
+            yield conn.topic, t, reader.deserialize(raw, conn.msgtype)
+
+
+def read_stream(mcap_file: Path, wanted: set[str]) -> Iterator[tuple[str, int, Any]]:
+    """(topic, receive ns, message) with the mcap library's stream reader, up to the first damaged record
+    (a file whose writer was killed has no summary and may end mid-record)."""
+    from mcap.records import Channel, Message, Schema
+    from mcap.stream_reader import StreamReader
+
+    channels: dict[int, Channel] = {}
+    schemas: dict[int, Schema] = {}
+    with mcap_file.open("rb") as fh:
+        records = StreamReader(fh, skip_magic=False).records
+        while True:
+            try:
+                record = next(records)
+            except StopIteration:
+                return
+            except Exception:  # truncated or damaged from here on
+                return
+            if isinstance(record, Schema):
+                schemas[record.id] = record
+            elif isinstance(record, Channel):
+                channels[record.id] = record
+            elif isinstance(record, Message):
+                channel = channels[record.channel_id]
+                if channel.topic in wanted:
+                    type_name = schemas[channel.schema_id].name
+                    yield channel.topic, record.log_time, TS.deserialize_cdr(record.data, type_name)
+
+
+@dataclass
+class Recomputed:
+    """A session's numbers, recomputed in the tests from independently read messages."""
+
+    events: list[dict[str, Any]]
+    clock_ns: np.ndarray
+    clock_s: np.ndarray
+    hr_ns: np.ndarray
+    hr_bpm: np.ndarray
+    hr_source_t: np.ndarray
+
+    @classmethod
+    def from_messages(cls, messages: Iterator[tuple[str, int, Any]], hr_topic: str) -> Recomputed:
+        events, clock_ns, clock_s, hr_ns, hr_bpm, hr_src = [], [], [], [], [], []
+        for topic, t, msg in messages:
+            if topic == topics.COACH_EVENTS:
+                events.append(json.loads(msg.data))
+            elif topic == "/clock":
+                clock_ns.append(t)
+                clock_s.append(msg.clock.sec + msg.clock.nanosec / 1e9)
+            elif topic == hr_topic:
+                width = msg.layout.dim[1].size
+                table = np.asarray(msg.data, dtype=np.float64)[msg.layout.data_offset:].reshape(-1, width)
+                hr_ns += [t] * table.shape[0]
+                hr_src += list(table[:, 0])
+                hr_bpm += list(table[:, 1])
+        return cls(events, np.asarray(clock_ns, np.int64), np.asarray(clock_s), np.asarray(hr_ns, np.int64),
+                   np.asarray(hr_bpm), np.asarray(hr_src))
+
+    def session_time(self, ns: np.ndarray) -> np.ndarray:
+        base = self.clock_ns[0]
+        return np.interp((ns - base) / 1e9, (self.clock_ns - base) / 1e9, self.clock_s)
+
+    def of(self, kind: str) -> list[dict[str, Any]]:
+        return [e for e in self.events if e.get("event") == kind]
+
+    def phase_windows(self) -> list[tuple[str, float, float]]:
+        phases = self.of("phase")
+        end = [e["t"] for e in self.events if e.get("event") in ("session_end", "session_stopped")]
+        stop = end[0] if end else math.inf
+        out = []
+        for i, p in enumerate(phases):
+            nxt = phases[i + 1]["t"] if i + 1 < len(phases) else math.inf
+            out.append((p["kind"], p["t"], min(p["t"] + p["duration"], nxt, stop)))
+        return out
+
+    def in_zone(self) -> dict[str, float]:
+        zone = self.of("zone")[-1]
+        t = self.session_time(self.hr_ns)
+        ok = np.isfinite(self.hr_bpm) & (self.hr_bpm >= 30) & (self.hr_bpm <= 230)
+        out = {}
+        for kind, a, b in self.phase_windows():
+            sel = ok & (t >= a) & (t < b)
+            if sel.any():
+                bpm = self.hr_bpm[sel]
+                out[kind] = float(np.mean((bpm >= zone["low"]) & (bpm <= zone["high"])))
+        return out

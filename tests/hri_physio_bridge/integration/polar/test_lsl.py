@@ -1,0 +1,119 @@
+"""The session on real pylsl outlets, read back by real pylsl inlets (fake device, real time)."""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import json
+import threading
+import uuid
+
+import pylsl
+import pytest
+
+from hri_physio_bridge.polar.config import PolarConfig
+from hri_physio_bridge.polar.encode import encode_ecg_frame, encode_heart_rate
+from hri_physio_bridge.polar.fake import FakePolarDevice, FakeScanner, Notification, fake_client_factory
+from hri_physio_bridge.polar.gatt import HEART_RATE_MEASUREMENT, PMD_DATA
+from hri_physio_bridge.polar.lsl_output import LslSink
+from hri_physio_bridge.polar.session import PolarSession
+from hri_physio_bridge.polar.synthetic import H10_SETTINGS
+
+pytestmark = pytest.mark.lsl
+
+NS = 1_000_000_000
+FRAME = 13
+FRAMES = 40  # 4 s of ECG at 130 Hz
+LOST = 17  # this frame is never sent
+
+
+def counter_timeline() -> tuple[list[Notification], list[int]]:
+    """ECG whose values count samples (a counter channel), one lost frame, HR once a second."""
+    t0 = 599616028236586218
+    timeline, sent = [], []
+    for k in range(FRAMES):
+        values = list(range(k * FRAME, (k + 1) * FRAME))
+        last = t0 + ((k + 1) * FRAME - 1) * NS // 130
+        if k != LOST:
+            timeline.append(
+                Notification(((k + 1) * FRAME - 1) / 130 + 0.01, PMD_DATA, encode_ecg_frame(last, values))
+            )
+            sent += values
+    for s in range(1, 4):
+        timeline.append(
+            Notification(s + 0.005, HEART_RATE_MEASUREMENT, encode_heart_rate(70 + s, [1000, 1010]))
+        )
+    return timeline, sent
+
+
+def test_lsl_streams_names_rates_and_every_sample_in_order() -> None:
+    device_id = uuid.uuid4().hex[:8].upper()
+    timeline, sent = counter_timeline()
+    device = FakePolarDevice(
+        f"Polar H10 {device_id}", features={0, 2}, settings=dict(H10_SETTINGS), timeline=timeline
+    )
+    sink = LslSink()
+    session = PolarSession(
+        PolarConfig(device=device_id, streams=["ecg", "hr", "rr"]),
+        FakeScanner([device]),
+        fake_client_factory,
+        sink,
+        clock=pylsl.local_clock,
+    )
+    loop = asyncio.new_event_loop()
+    stop = asyncio.Event()
+    streaming = threading.Event()
+    session.listeners.append(lambda e: streaming.set() if e.get("state") == "streaming" else None)
+    result: list[int] = []
+    runner = threading.Thread(
+        target=lambda: result.append(loop.run_until_complete(session.run(stop))), daemon=True
+    )
+    runner.start()
+    try:
+        assert streaming.wait(30), "the session did not start streaming"
+        inlets = {}
+        for kind in ("ECG", "HR", "RR", "Markers"):
+            found = pylsl.resolve_byprop("name", f"PolarH10/{device_id}/{kind}", timeout=15)
+            assert found, f"no LSL stream PolarH10/{device_id}/{kind}"
+            inlets[kind] = pylsl.StreamInlet(found[0], max_buflen=60)
+            inlets[kind].open_stream(timeout=10)
+        info = {k: inlet.info() for k, inlet in inlets.items()}
+        assert (info["ECG"].channel_count(), info["ECG"].nominal_srate(), info["ECG"].type()) == (
+            1,
+            130.0,
+            "ECG",
+        )
+        assert (info["HR"].channel_count(), info["HR"].nominal_srate()) == (1, 1.0)
+        assert (info["RR"].channel_count(), info["RR"].nominal_srate()) == (1, 0.0)
+        assert info["Markers"].channel_format() == pylsl.cf_string
+        assert info["ECG"].desc().child("channels").child("channel").child_value("unit") == "microvolts"
+        assert info["ECG"].source_id() == f"{device_id}-ECG"
+        loop.call_soon_threadsafe(device.release)
+        received: dict[str, list[tuple[float, list]]] = {k: [] for k in inlets}
+
+        def pull_all(timeout: float) -> None:
+            for kind, inlet in inlets.items():
+                samples, stamps = inlet.pull_chunk(timeout=timeout, max_samples=4096)
+                received[kind] += list(zip(stamps, samples, strict=False))
+
+        deadline = pylsl.local_clock() + 30
+        while len(received["ECG"]) < len(sent) and pylsl.local_clock() < deadline:
+            pull_all(0.2)
+        pull_all(0.5)
+    finally:
+        loop.call_soon_threadsafe(stop.set)
+        runner.join(30)
+        sink.close()
+    assert result == [0]
+    ecg_values = [int(row[0]) for _, row in received["ECG"]]
+    assert ecg_values == sent  # nothing dropped, duplicated or reordered; only the lost frame is missing
+    stamps = [t for t, _ in received["ECG"]]
+    assert all(b > a for a, b in itertools.pairwise(stamps))
+    assert stamps[-1] - stamps[0] == pytest.approx((len(sent) + FRAME - 1) / 130, abs=0.05)
+    assert [row[0] for _, row in received["HR"]] == [71.0, 72.0, 73.0]
+    rr_stamps = [t for t, _ in received["RR"]]
+    assert len(rr_stamps) == 6 and all(b > a for a, b in itertools.pairwise(rr_stamps))
+    markers = [json.loads(row[0]) for _, row in received["Markers"]]
+    gaps = [m for m in markers if m["event"] == "gap"]
+    assert len(gaps) == 1 and gaps[0]["missing"] == FRAME and gaps[0]["stream"] == "ECG"
+    assert session.status()["streams"]["ecg"]["samples"] == len(sent)

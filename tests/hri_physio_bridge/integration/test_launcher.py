@@ -1,0 +1,146 @@
+"""The process launcher: output capture, clean stop escalation, missing scripts."""
+
+from __future__ import annotations
+
+import io
+import os
+import signal
+import stat
+import sys
+from pathlib import Path
+
+import pytest
+
+from hri_physio_bridge.launcher import ManagedProcess, ProcessGroup, find_executable
+
+
+def script(tmp_path: Path, name: str, body: str) -> str:
+    path = tmp_path / name
+    path.write_text(f"#!{sys.executable}\n{body}")
+    path.chmod(path.stat().st_mode | stat.S_IEXEC)
+    return str(path)
+
+
+@pytest.fixture
+def on_path(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    monkeypatch.setenv("PATH", f"{tmp_path}{os.pathsep}{os.environ['PATH']}")
+    return tmp_path
+
+
+def ignoring(on_path: Path, name: str, *signals: str) -> str:
+    """A script that ignores ``signals``, prints 'ready' and idles."""
+    ignore = "".join(f"signal.signal(signal.{sig}, signal.SIG_IGN)\n" for sig in signals)
+    return script(on_path, name, f"import signal, time\n{ignore}print('ready', flush=True)\n"
+                                 "while True: time.sleep(0.05)\n")
+
+
+def started(group: ProcessGroup, *names: str) -> list[ManagedProcess]:
+    """Start the scripts ``<name>_node`` as ``name`` and wait until each has printed 'ready'."""
+    procs = [group.start(name, f"{name}_node", env=dict(os.environ)) for name in names]
+    for p in procs:
+        while "ready" not in p.lines:
+            assert p.returncode is None
+    return procs
+
+
+def test_output_is_prefixed_and_kept(on_path: Path) -> None:
+    script(on_path, "hello_node", "print('hello'); print('bye')\n")
+    out = io.StringIO()
+    group = ProcessGroup(out=out)
+    p = group.start("greeter", "hello_node", env=dict(os.environ))
+    assert group.wait_any_exit(10) is p
+    assert group.stop() == {"greeter": 0}
+    assert out.getvalue().splitlines() == ["[greeter] hello", "[greeter] bye"]
+    assert p.lines == ["hello", "bye"]
+
+
+def test_stop_sends_sigint_first_and_escalates(on_path: Path) -> None:
+    script(on_path, "polite_node", (
+        "import signal, sys, time\n"
+        "signal.signal(signal.SIGINT, lambda *a: (print('flushed', flush=True), sys.exit(0)))\n"
+        "print('ready', flush=True)\n"
+        "while True: time.sleep(0.05)\n"))
+    ignoring(on_path, "stubborn_node", "SIGINT", "SIGTERM")
+    group = ProcessGroup(out=io.StringIO())
+    polite, _ = started(group, "polite", "stubborn")
+    codes = group.stop(grace=0.5)
+    assert codes["polite"] == 0 and "flushed" in polite.lines
+    assert codes["stubborn"] == -signal.SIGABRT  # after SIGINT and SIGTERM were ignored
+
+
+def test_a_node_stuck_on_its_way_out_prints_where_before_it_is_killed(on_path: Path) -> None:
+    """SIGINT is taken, the node then hangs (as in a close that never returns): SIGABRT shows where."""
+    script(on_path, "stuck_node", (
+        "import sys, time\n"
+        "from hri_physio_bridge.node_runner import _enable_stack_dumps\n"
+        "from hri_physio_bridge.stop_signals import install_stop_handlers\n"
+        "_enable_stack_dumps()\n"
+        "stop = install_stop_handlers()\n"
+        "def close_that_never_returns():\n"
+        "    while True: time.sleep(0.05)\n"
+        "print('ready', flush=True)\n"
+        "stop.wait()\n"
+        "close_that_never_returns()\n"))
+    ignoring(on_path, "deaf_node", "SIGINT", "SIGTERM", "SIGABRT")
+    group = ProcessGroup(out=io.StringIO())
+    stuck, _ = started(group, "stuck", "deaf")
+    codes = group.stop(grace=0.5)
+    assert codes == {"stuck": -signal.SIGABRT, "deaf": -signal.SIGKILL}
+    assert any("close_that_never_returns" in line for line in stuck.lines), stuck.lines
+
+
+def test_a_failed_node_is_reported_by_its_own_error_line() -> None:
+    """What a launcher says when a node refuses to start: the node's one-line error, not a count."""
+    group = ProcessGroup(out=io.StringIO())
+    sim = group.start("simulator", "physio_simulator", ["--bpm", "0"], env=dict(os.environ), echo=False)
+    assert group.wait_any_exit(60) is sim
+    group.stop()
+    assert sim.returncode == 2
+    line = sim.error_line()
+    assert line.startswith("physio_simulator: error:") and "bpm" in line, sim.lines
+
+
+def test_wait_any_exit_ends_on_timeout_and_on_stop(on_path: Path) -> None:
+    import threading
+
+    script(on_path, "idle_node", "import time\nwhile True: time.sleep(0.05)\n")
+    group = ProcessGroup(out=io.StringIO())
+    group.start("idle", "idle_node", env=dict(os.environ))
+    assert group.wait_any_exit(0.2) is None
+    stop = threading.Event()
+    threading.Timer(0.2, stop.set).start()
+    assert group.wait_any_exit(None, stop=stop) is None and stop.is_set()
+    group.stop(grace=2.0)
+
+
+def test_missing_console_script_is_named() -> None:
+    with pytest.raises(FileNotFoundError, match="console script 'no_such_node' not found"):
+        find_executable("no_such_node")
+
+
+def test_children_are_stopped_when_the_launcher_is_killed(on_path: Path, tmp_path: Path) -> None:
+    import signal
+    import subprocess
+    import time
+
+    pid_file = tmp_path / "child.pid"
+    script(on_path, "sleepy_node", (
+        "import os, time\n"
+        f"open({str(pid_file)!r}, 'w').write(str(os.getpid()))\n"
+        "while True: time.sleep(0.05)\n"))
+    launcher = subprocess.Popen([sys.executable, "-c", (
+        "import os, time\n"
+        "from hri_physio_bridge.launcher import ProcessGroup\n"
+        "ProcessGroup().start('sleepy', 'sleepy_node', env=dict(os.environ))\n"
+        "while True: time.sleep(0.05)\n")], env=dict(os.environ))
+    deadline = time.monotonic() + 20
+    while not (pid_file.exists() and pid_file.read_text()):
+        assert time.monotonic() < deadline and launcher.poll() is None
+        time.sleep(0.02)
+    child = int(pid_file.read_text())
+    launcher.send_signal(signal.SIGKILL)  # no chance to stop anything itself
+    launcher.wait(10)
+    deadline = time.monotonic() + 10
+    while Path(f"/proc/{child}").exists() and "Z" not in Path(f"/proc/{child}/stat").read_text().split()[2]:
+        assert time.monotonic() < deadline, "the child outlived its launcher"
+        time.sleep(0.02)

@@ -1,0 +1,169 @@
+"""hri_physio_session: the closed loop as a researcher starts it, on a shortened routine.
+
+Real processes throughout (participant on LSL, receivers, processor, coach, controller, mock
+robot, recorder). What a session leaves is checked in its folder: summary.json and the bag.
+The whole 23-minute routine runs in tests/session/test_session_demo.py.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from helpers import SRC, NodeProcess, session_env
+
+pytestmark = pytest.mark.ros
+
+BIN = Path(sys.prefix) / "bin"
+PACKAGED = SRC / "hri_physio_coach" / "config"
+FOLDER_LINE = re.compile(r"^\[session\] session folder: (\S+)$", re.M)
+
+
+@pytest.fixture
+def short_session(tmp_path: Path, session_tag: str) -> list[str]:
+    """A 4.5-minute routine (1 min calibration, warm-up, conditioning, cool-down) and its options."""
+    routine = yaml.safe_load((PACKAGED / "exercise_routine.yaml").read_text())
+    keep = {"calibration": (0, None), "warm_up": (0, 60), "conditioning": (1, 90), "cool_down": (0, 60)}
+    for phase in routine["phases"]:
+        index, seconds = keep[phase["kind"]]
+        phase["activities"] = [phase["activities"][index]]  # marching, lateral knees, step-up
+        if seconds is not None:
+            phase["activities"][0]["duration"] = seconds
+    (tmp_path / "routine.yaml").write_text(yaml.safe_dump(routine))
+    (tmp_path / "coach.yaml").write_text("calib_time: 60\n")
+    return ["--routine", str(tmp_path / "routine.yaml"), "--conf", str(tmp_path / "coach.yaml"),
+            "--out", str(tmp_path / "sessions"), "--device-id", f"SIM{session_tag}", "--speed", "20"]
+
+
+def run_session(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run([str(BIN / "hri_physio_session"), *args], capture_output=True, text=True,
+                          timeout=60, env=session_env() if env is None else env, stdin=subprocess.DEVNULL)
+
+
+def session_folder(output: str) -> Path:
+    found = FOLDER_LINE.findall(output)
+    assert len(found) == 1, output
+    return Path(found[0])
+
+
+def read_bag(bag: Path) -> dict[str, list]:
+    from rosbags.highlevel import AnyReader
+
+    out: dict[str, list] = {}
+    with AnyReader([bag]) as reader:
+        for conn, _t, raw in reader.messages():
+            out.setdefault(conn.topic, []).append(reader.deserialize(raw, conn.msgtype))
+    return out
+
+
+def test_coach_can_adapt_on_the_processors_heart_rate(short_session: list[str], tmp_path: Path) -> None:
+    # 10x: the processor's NeuroKit windows (one per 5 s of ECG) keep up on a loaded machine.
+    with NodeProcess("hri_physio_session", *short_session, "--hr-source", "ecg", "--no-record",
+                     "--speed", "10", env=session_env()) as session:
+        code = session.wait(240)
+    assert code == 0, session.output
+    folder = session_folder(session.output)
+    assert not (folder / "bag").exists() and not (folder / "report.json").exists()  # nothing recorded
+    summary = json.loads((folder / "summary.json").read_text())
+    counts = summary["session"]
+    assert summary["outcome"] == "finished" and summary["exit_status"] == 0
+    starved = counts["gated"].get("too_few_samples", 0)
+    assert counts["rule_updates"] >= 5 and starved <= 2, counts
+    # The coach's input is the processor's HR: one value per 5 s window of ECG. Counted by arrival
+    # between session start and end, so a processor that lags (a loaded machine) may deliver windows
+    # of ECG from before the start inside the session: only the lower bound holds for any load.
+    assert counts["hr_samples"] >= 270 / 5 - 5, counts
+    coach = yaml.safe_load((folder / "configs" / "qt_physio_coach.yaml").read_text())["qt_physio_coach"]
+    assert coach["ros__parameters"]["hr_topic"] == "/physio/polar_h10/ecg/hr"
+
+
+def test_sigint_stops_every_node_and_leaves_a_bag_a_summary_and_a_report(short_session: list[str]) -> None:
+    """Ctrl-C mid-session; meanwhile a second session told to use the same ROS domain is refused."""
+    with NodeProcess("hri_physio_session", *short_session, "--speed", "2", "--no-ecg",
+                     env=session_env()) as session:
+        session.wait_for_output("[session] system ready", timeout=120)
+        first = json.loads((session_folder_of_running(session.output) / "summary.json").read_text())
+        # A domain of its own: not the one this test process holds.
+        assert first["outcome"] == "running" and first["ros_domain"] != int(os.environ["ROS_DOMAIN_ID"])
+        second = run_session(*short_session, env=session_env(ROS_DOMAIN_ID=str(first["ros_domain"])))
+        assert second.returncode == 1, (second.stdout, second.stderr)
+        line = second.stderr.strip()
+        assert "\n" not in line and line.startswith("hri_physio_session: error: ROS domain "), line
+        assert f"pid {session.proc.pid}" in line and first["folder"] in line
+        assert "Traceback" not in second.stdout + second.stderr
+        session.wait_for_output("[session] 01:00/04:30", timeout=120)  # a minute of session ran
+        code = session.stop(signal.SIGINT, timeout=120)
+    out = session.output
+    assert code == 0, out
+    assert "SIGINT: stopping the session" in out and "Traceback" not in out
+    assert re.search(r"\[session\] stopped before its end: [01]\.\d min of session", out), out
+    folder = session_folder(out)
+    assert len(list(folder.parent.iterdir())) == 1  # the refused session made no folder
+    summary = json.loads((folder / "summary.json").read_text())
+    assert (summary["outcome"], summary["stopped_by"], summary["exit_status"]) == ("stopped", "SIGINT", 0)
+    assert all(node["exit_status"] == 0 for node in summary["nodes"].values()), summary["nodes"]
+    msgs = read_bag(folder / "bag")
+    coach = [json.loads(m.data) for m in msgs["/coach/events"]]
+    kinds = [e["event"] for e in coach]
+    assert kinds[0] == "session_start" and "session_end" not in kinds and "session_stopped" in kinds
+    assert summary["session"]["rule_updates"] == kinds.count("rule_update")
+    # The streamers played what the coach asked for, on the session's clock, and the bag shows it.
+    audio = [json.loads(m.data) for m in msgs["/audio_streamer/status"]]
+    assert any(a["state"] == "playing" and a["source"] == "relaxing" and a["sink"] == "null" for a in audio)
+    video = [json.loads(m.data) for m in msgs["/video_streamer/status"]]
+    assert any(v["state"] == "playing" and v["display"] == "offscreen" for v in video)
+    previews = msgs["/video_streamer/preview"]
+    assert previews and previews[0].format.lower().startswith("jp")
+    mock = [json.loads(m.data) for m in msgs["/qt_robot/mock/events"]]
+    assert not [e for e in mock if e["event"] in ("audio", "video")]  # no longer mirrored by the mock
+    for node in ("audio_streamer", "video_streamer"):
+        assert (folder / "configs" / f"{node}.yaml").is_file() and summary["nodes"][node]["exit_status"] == 0
+    report = json.loads((folder / "report.json").read_text())  # the report of what ran
+    zone = next(e for e in coach if e["event"] == "zone")
+    assert report["hr_rest"] == pytest.approx(zone["hr_rest"], abs=0.01)
+
+
+def session_folder_of_running(output: str) -> Path:
+    """The folder a running session announced at its start."""
+    m = re.search(r"^\[session\] folder (\S+);", output, re.M)
+    assert m, output
+    return Path(m.group(1))
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--speed", "0"], "speed: expected greater than 0"),
+    (["--age", "150"], "age: expected less than or equal to 120"),
+    (["--conf", "/nonexistent/coach.yaml"], "conf: /nonexistent/coach.yaml does not exist"),
+    (["--hr-source", "ecg", "--no-ecg"], "hr_source ecg needs the ECG path"),
+    (["--policy", "bogus"], "--policy: invalid choice"),
+])
+def test_bad_options_are_one_clear_line(args: list[str], message: str, tmp_path: Path) -> None:
+    c = run_session(*args, "--out", str(tmp_path / "s"))
+    assert c.returncode == 2, (c.stdout, c.stderr)
+    lines = c.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("hri_physio_session: error: "), lines
+    assert message in lines[0], lines
+    assert c.stdout == "" and not (tmp_path / "s").exists()
+
+
+@pytest.mark.parametrize("coach_yaml,message", [
+    ("zone_low: 0.8\nzone_high: 0.7\n", "zone bounds out of order"),
+    ("routine_file: /nonexistent/routine.yaml\n", "/nonexistent/routine.yaml"),
+    ("speed_idx: 9\n", "speed_idx 9 is outside the ladder"),
+])
+def test_an_invalid_coach_configuration_starts_nothing(coach_yaml: str, message: str, tmp_path: Path) -> None:
+    conf = tmp_path / "coach.yaml"
+    conf.write_text(coach_yaml)
+    c = run_session("--conf", str(conf), "--out", str(tmp_path / "s"))
+    assert c.returncode == 2, (c.stdout, c.stderr)
+    lines = c.stderr.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0], lines
+    assert not (tmp_path / "s").exists()  # no folder, no bag, no node started
