@@ -30,9 +30,9 @@ from hri_physio_bridge.polar.capture import CaptureError, read_capture
 from hri_physio_bridge.polar.config import PolarConfig
 from hri_physio_bridge.polar.devices import device_id_of
 from hri_physio_bridge.receiver import ReceiverConfig
+from hri_physio_bringup.clock import CLOCK_STEP
 from hri_physio_bringup.folder import SessionFolder
 from hri_physio_bringup.options import SessionConfig
-from hri_physio_bringup.view import CLOCK_STEP
 from hri_physio_coach.coach import CoachError, ExerciseCoach
 from hri_physio_coach.config import COACH_NODE, CoachNodeConfig
 from hri_physio_coach.participant_config import PARTICIPANT_NODE, ParticipantNodeConfig

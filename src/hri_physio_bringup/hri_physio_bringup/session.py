@@ -49,6 +49,7 @@ from hri_physio_bridge.launcher import ManagedProcess, ProcessGroup
 from hri_physio_bridge.ros_tools import BackgroundNode, clock_message
 from hri_physio_bridge.stop_signals import install_stop_handlers
 from hri_physio_bridge.waiting import wait_until
+from hri_physio_bringup.clock import ClockGuard, SimClock
 from hri_physio_bringup.console import (
     LiveConsole,
     PlainConsole,
@@ -72,7 +73,7 @@ from hri_physio_bringup.plan import (
     coach_config,
     plan_session,
 )
-from hri_physio_bringup.view import SessionView, SimClock, overdue, session_counts, summary
+from hri_physio_bringup.view import SessionView, overdue, session_counts, summary
 
 #: Session seconds past the routine's end after which a coach that has not ended is stopped.
 END_MARGIN = 60.0
@@ -87,7 +88,7 @@ class ClockAndWatcher(BackgroundNode):
     """Publishes /clock and watches the session's topics, on its own executor thread."""
 
     def __init__(self, view: SessionView, hr_topic: str, receivers: list[str],
-                 listeners: tuple[tuple[str, str], ...]) -> None:
+                 listeners: tuple[tuple[str, str], ...], guard: ClockGuard | None = None) -> None:
         from rosgraph_msgs.msg import Clock
         from std_msgs.msg import Float64MultiArray, String
 
@@ -98,6 +99,7 @@ class ClockAndWatcher(BackgroundNode):
         self._string_cls = String
         self.view = view
         self.listeners = listeners
+        self.guard = guard
         self.lock = threading.Lock()
         self.sim_now = math.nan  # the last /clock published: what sim time it is when a sample arrives
         # Deep: at high --speed hundreds of clock messages a second must reach the recorder too.
@@ -105,17 +107,24 @@ class ClockAndWatcher(BackgroundNode):
         self.control_pub = self.node.create_publisher(String, topics.COACH_CONTROL, command_qos())
         strap = hr_topic == topics.POLAR_H10_HR
 
+        def strap_samples(frame: Any) -> None:
+            view.strap_samples += frame.num_samples
+            if guard is not None:
+                for t in frame.timestamps:
+                    guard.hr_sample(float(t), self.sim_now)
+
         def on_hr(msg: Float64MultiArray) -> None:
             frame = msg_to_frame(msg)
             with self.lock:
                 for t, bpm in zip(frame.timestamps, frame.values[:, -1], strict=True):
                     view.on_hr(float(bpm), float(t), self.sim_now)
                 if strap:
-                    view.strap_samples += frame.num_samples
+                    strap_samples(frame)
 
         def on_strap(msg: Float64MultiArray) -> None:
+            frame = msg_to_frame(msg)
             with self.lock:
-                view.strap_samples += msg_to_frame(msg).num_samples
+                strap_samples(frame)
 
         def on_json(apply: Callable[[dict], None]) -> Callable[[String], None]:
             def callback(msg: String) -> None:
@@ -153,7 +162,42 @@ class ClockAndWatcher(BackgroundNode):
         self.node.create_subscription(String, topics.QT_MOCK_EVENTS, on_json(count_action), event_qos())
         for node in receivers:
             self.node.create_subscription(String, f"/{node}/status", on_json(receiver_status(node)), 10)
+        if guard is not None:
+            self._watch_the_loop(guard)
         self.start()
+
+    def _watch_the_loop(self, guard: ClockGuard) -> None:
+        """What the clock guard needs: robot commands and their answers, audio requests and the status."""
+        from std_msgs.msg import String
+
+        from hri_physio_bridge.qos import command_qos, event_qos
+
+        def locked(action: Callable[[Any], None]) -> Callable[[Any], None]:
+            def callback(msg: Any) -> None:
+                with self.lock:
+                    action(msg)
+            return callback
+
+        def settled(msg: Any) -> None:
+            try:
+                counts = json.loads(msg.data).get("requests") or {}
+                done = sum(int(counts.get(k, 0)) for k in ("started", "failed", "superseded"))
+            except (ValueError, AttributeError, TypeError):
+                return  # not a status this launcher can read: the recorder keeps it as it is
+            guard.media_settled(done)
+
+        sub, now = self.node.create_subscription, lambda: self.sim_now
+        sub(String, topics.QT_COMMANDS, locked(lambda _m: guard.command_sent(now())), command_qos())
+        sub(String, topics.QT_REPLIES, locked(lambda _m: guard.command_answered()), command_qos())
+        sub(String, topics.AUDIO_REQUEST, locked(lambda _m: guard.media_requested(now())), command_qos())
+        sub(String, topics.AUDIO_STATUS, locked(settled), event_qos())
+
+    def advance(self, clock: SimClock) -> None:
+        """Publish the clock values that are due, no further than the guard allows."""
+        with self.lock:
+            limit = None if self.guard is None else self.guard.limit(clock.t)
+        for t in clock.due_steps(limit):
+            self.publish_clock(t)
 
     def publish_clock(self, t: float) -> None:
         self.clock_pub.publish(clock_message(t))
@@ -200,6 +244,8 @@ class Outcome:
     stopped_by: str | None = None
     wall: float = 0.0
     node_codes: dict[str, int] = field(default_factory=dict)
+    #: How the clock guard held sim time back for the loop (ClockGuard.report), None: no guard.
+    clock: dict[str, Any] | None = None
 
     def fail(self, problem: str, code: int = 1) -> None:
         if self.problem is None:
@@ -227,8 +273,7 @@ def wait_for_system(watcher: ClockAndWatcher, group: ProcessGroup, clock: SimClo
     dead: list[ManagedProcess] = []
 
     def ready() -> bool:
-        for t in clock.due_steps():
-            watcher.publish_clock(t)
+        watcher.advance(clock)
         dead[:] = [p for p in group.procs if p.returncode is not None]
         if dead:
             return True
@@ -258,7 +303,9 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
                 view: SessionView, group: ProcessGroup, stop: threading.Event, out: Outcome) -> SimClock:
     """Start the nodes, wait for them, run the routine to its end (or a stop); returns the sim clock."""
     receivers = [n.name for n in plan.nodes if n.script == "physio_receiver"]
-    watcher = ClockAndWatcher(view, plan.hr_topic, receivers, plan.listeners)
+    # A simulated participant's loop can be held to the clock; a real strap lives in real time.
+    guard = None if options.polar else ClockGuard()
+    watcher = ClockAndWatcher(view, plan.hr_topic, receivers, plan.listeners, guard)
     # The clock runs at --speed from the beginning: before 'start' the participant sits and the
     # processor fills its first window (60 s of ECG) without keeping the launcher waiting.
     clock = SimClock(start=float(int(time.time())), speed=options.speed)
@@ -274,8 +321,7 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
         console.say(f"[session] system ready: session started at {options.speed:g}x")
 
         def finished() -> bool:
-            for t in clock.due_steps():
-                watcher.publish_clock(t)
+            watcher.advance(clock)
             dead = [p for p in group.procs if p.returncode is not None and p is not coach]
             if dead:
                 p = dead[0]
@@ -302,8 +348,7 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
             end = clock.t + TAIL
 
             def tail_done() -> bool:
-                for t in clock.due_steps():
-                    watcher.publish_clock(t)
+                watcher.advance(clock)
                 return clock.t >= end
 
             wait_until(tail_done, None, stop=stop, poll=0.01)
@@ -313,6 +358,12 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
             console.say(f"{out.stopped_by}: stopping the session")
         out.node_codes = group.stop()
         watcher.close()
+        if guard is not None:
+            out.clock = guard.report(clock)
+            if clock.held_wall >= 1.0:
+                causes = ", ".join(f"{cause} {n}" for cause, n in sorted(guard.holds.items()))
+                console.say(f"[session] the clock waited {clock.held_wall:.1f} s of wall time for the loop "
+                            f"(holds: {causes}): the machine was busy; what ran is as at full speed")
 
 
 def _write_report(folder: SessionFolder) -> list[str]:
@@ -364,6 +415,7 @@ def _summary_json(options: SessionConfig, plan: SessionPlan, folder: SessionFold
         "wall_seconds": round(out.wall, 3),
         "speed": options.speed,
         "sim_time_end": None if clock is None else clock.t,
+        "clock": out.clock,
         "ros_domain": claim.domain,
         "ros_domain_chosen": claim.chosen,
         "lsl_device_id": plan.device_id,

@@ -1,8 +1,8 @@
-"""What the session launcher knows and prints, and the sim clock it drives (no rclpy).
+"""What the session launcher knows and prints (no rclpy).
 
 :class:`SessionView` is filled from the session's topics (coach state and events, heart rate,
-participant model, mock robot events) and turns them into progress lines and a summary;
-:class:`SimClock` says which ``/clock`` values are due, on an injected wall clock.
+participant model, mock robot events) and turns them into progress lines and a summary; the sim
+clock the launcher drives is :mod:`hri_physio_bringup.clock`.
 
 Events arrive as text: :meth:`SessionView.on_event_text` takes every message of
 ``/coach/events``; one that is not a JSON object with an ``event`` (or whose fields do not fit
@@ -24,9 +24,6 @@ from typing import Any
 from hri_physio_bridge.rate_limit import RateLimitedLog
 from hri_physio_coach.gates import label
 
-#: Sim seconds per /clock message: no larger than any sim-time node's timer period
-#: (coach tick, participant update and the mock's joint states), or timers skip periods.
-CLOCK_STEP = 0.1
 EXERCISE_PHASES = ("warm_up", "conditioning", "cool_down")
 #: What can be wrong with a message on /coach/events (keys of :attr:`SessionView.malformed`).
 NOT_JSON, NOT_OBJECT, NO_EVENT, BAD_FIELDS = "not_json", "not_object", "no_event", "bad_fields"
@@ -154,26 +151,6 @@ class SessionView:
         pace = f"speed {speed:.2f} tempo {self.state.get('ladder_tempo')}" if speed is not None else "pace -"
         return (f"[session] {elapsed} {where:32s} HR {self.hr:5.1f} bpm (model {self.model_hr:5.1f})  "
                 f"zone {zone}  {pace}  adaptations {self.adaptations}  robot actions {self.robot_actions}")
-
-
-class SimClock:
-    """Sim time advancing at ``speed`` x wall time, in steps of CLOCK_STEP sim seconds."""
-
-    def __init__(self, start: float, speed: float, monotonic: Callable[[], float] = time.monotonic) -> None:
-        self.t = start
-        self.speed = speed
-        self._base = start
-        self._monotonic = monotonic
-        self._wall = monotonic()
-
-    def due_steps(self) -> list[float]:
-        """The clock values to publish now, to keep up with the wall clock."""
-        target = self._base + (self._monotonic() - self._wall) * self.speed
-        steps = []
-        while self.t + CLOCK_STEP <= target:
-            self.t += CLOCK_STEP
-            steps.append(self.t)
-        return steps
 
 
 def summary(view: SessionView, wall: float, bag: str | None, now: float | None = None) -> str:

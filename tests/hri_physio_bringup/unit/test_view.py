@@ -1,4 +1,4 @@
-"""The session launcher's logic: the sim clock's steps and what it makes of the coach's events."""
+"""The session launcher's view: what it makes of the coach's events and the heart rate."""
 
 from __future__ import annotations
 
@@ -8,26 +8,13 @@ import pytest
 
 from hri_physio_bringup.view import (
     BAD_FIELDS,
-    CLOCK_STEP,
     NO_EVENT,
     NOT_JSON,
     NOT_OBJECT,
     SessionView,
-    SimClock,
     summary,
 )
 from hri_physio_coach import gates
-
-
-def test_sim_clock_steps_keep_up_with_the_wall_clock_at_its_speed() -> None:
-    wall = [100.0]
-    clock = SimClock(start=1000.0, speed=30.0, monotonic=lambda: wall[0])
-    assert clock.due_steps() == []
-    wall[0] += 0.01  # 0.3 s of sim time: three steps
-    steps = clock.due_steps()
-    assert steps == pytest.approx([1000.0 + CLOCK_STEP * k for k in (1, 2, 3)])
-    wall[0] += 0.001  # 0.03 s: not a whole step yet
-    assert clock.due_steps() == []
 
 
 def test_view_counts_adaptations_gated_updates_and_time_in_zone() -> None:

@@ -1,0 +1,128 @@
+"""The session's sim clock and the guard that holds it while the loop lags (injected wall clock)."""
+
+from __future__ import annotations
+
+import pytest
+
+from hri_physio_bringup.clock import CLOCK_STEP, HR, MEDIA, ROBOT, ClockGuard, SimClock
+
+
+class Wall:
+    def __init__(self) -> None:
+        self.t = 100.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def test_sim_clock_steps_keep_up_with_the_wall_clock_at_its_speed() -> None:
+    wall = Wall()
+    clock = SimClock(start=1000.0, speed=30.0, monotonic=wall)
+    assert clock.due_steps() == []
+    wall.t += 0.01  # 0.3 s of sim time: three steps
+    assert clock.due_steps() == pytest.approx([1000.0 + CLOCK_STEP * k for k in (1, 2, 3)])
+    wall.t += 0.001  # 0.03 s: not a whole step yet
+    assert clock.due_steps() == []
+
+
+def test_past_its_limit_the_clock_runs_at_real_time_and_goes_on_at_its_speed_without_catching_up() -> None:
+    wall = Wall()
+    clock = SimClock(start=0.0, speed=10.0, monotonic=wall)
+    wall.t += 1.0  # 10 s due at 10x, but only 2 s allowed: the clock reaches 2 s
+    assert clock.due_steps(limit=2.0)[-1] == pytest.approx(2.0)
+    wall.t += 1.0  # held: one second of wall time is one second of sim time
+    steps = clock.due_steps(limit=2.0)
+    assert steps[0] == pytest.approx(2.1) and steps[-1] == pytest.approx(3.0)
+    assert clock.held_wall == pytest.approx(0.8 + 0.9)  # 8 s lost in the first second, 9 s in the second
+    wall.t += 0.5  # released: 5 s of sim from where it stood, not what it would have reached
+    steps = clock.due_steps()
+    assert steps[0] == pytest.approx(3.1) and steps[-1] == pytest.approx(8.0)
+
+
+def test_a_clock_at_real_time_is_not_slowed_by_a_limit() -> None:
+    wall = Wall()
+    clock = SimClock(start=0.0, speed=1.0, monotonic=wall)
+    wall.t += 3.0
+    assert clock.due_steps(limit=0.5)[-1] == pytest.approx(3.0) and clock.held_wall == 0.0
+
+
+def test_the_guard_holds_for_heart_rate_that_has_not_come_through() -> None:
+    wall = Wall()
+    guard = ClockGuard(hr_lag=2.0, monotonic=wall)
+    assert guard.limit(10.0) is None  # nothing seen yet: no limit
+    # Samples stamped on another clock (offset 5000 s), arriving 0.1-0.4 s (sim) after they were taken.
+    for taken, delay in ((10.0, 0.3), (11.0, 0.1), (12.0, 0.4)):
+        guard.hr_sample(5000.0 + taken, taken + delay)
+    # The least delayed sample sets the offset: a sample counts as taken 0.1 s before it arrives.
+    assert guard.limit(12.4) == pytest.approx(12.0 + 0.1 + 2.0)
+    assert guard.limit(14.1) == pytest.approx(14.1) and guard.holds == {HR: 1}
+    assert guard.limit(14.1) == pytest.approx(14.1) and guard.holds == {HR: 1}  # the same hold
+    guard.hr_sample(5013.0, 14.1)
+    assert guard.limit(14.1) == pytest.approx(15.1)
+
+
+def test_the_guard_holds_for_unanswered_commands_and_unsettled_audio_requests() -> None:
+    guard = ClockGuard(reply_lag=1.0, monotonic=Wall())
+    guard.command_sent(20.0)
+    guard.command_sent(20.5)
+    guard.media_requested(20.2)
+    assert guard.limit(20.0) == pytest.approx(21.0)
+    guard.command_answered()
+    assert guard.limit(20.0) == pytest.approx(21.2)  # now the audio request is the oldest
+    guard.media_settled(1)
+    assert guard.limit(20.0) == pytest.approx(21.5)
+    guard.command_answered()
+    assert guard.limit(20.0) is None
+    guard.media_settled(1)  # a status repeating the same counts settles nothing more
+    guard.media_requested(30.0)
+    assert guard.limit(30.0) == pytest.approx(31.0)
+
+
+def test_an_answer_heard_before_its_request_settles_the_request_when_it_is_heard() -> None:
+    guard = ClockGuard(reply_lag=1.0, monotonic=Wall())
+    guard.media_settled(1)  # the streamer's status came first (another topic, another node)
+    guard.media_requested(5.0)
+    assert guard.limit(5.0) is None
+    guard.command_answered()
+    guard.command_sent(6.0)
+    guard.command_sent(6.5)
+    assert guard.limit(6.0) == pytest.approx(7.5)
+
+
+def test_a_hold_is_given_up_after_max_hold_and_counted() -> None:
+    wall = Wall()
+    guard = ClockGuard(reply_lag=1.0, max_hold=5.0, monotonic=wall)
+    guard.command_sent(50.0)  # the controller died: no answer will come
+    assert guard.limit(51.0) == pytest.approx(51.0) and guard.holds == {ROBOT: 1}
+    wall.t += 4.0
+    assert guard.limit(51.0) == pytest.approx(51.0)
+    wall.t += 1.5
+    assert guard.limit(51.0) is None and guard.released == {ROBOT: 1}
+    guard.media_requested(60.0)
+    wall.t += 1.0
+    assert guard.limit(61.0) == pytest.approx(61.0)
+    wall.t += 6.0
+    assert guard.limit(61.0) is None and guard.released == {ROBOT: 1, MEDIA: 1}
+    clock = SimClock(0.0, 1.0, monotonic=wall)
+    assert guard.report(clock) == {"held_wall_s": 0.0, "holds": {ROBOT: 1, MEDIA: 1},
+                                   "released": {ROBOT: 1, MEDIA: 1}}
+
+
+def test_a_limit_less_than_a_step_ahead_holds_the_clock_and_is_given_up_in_time() -> None:
+    wall = Wall()
+    guard = ClockGuard(reply_lag=1.0, max_hold=5.0, monotonic=wall)
+    guard.command_sent(10.0)
+    assert guard.limit(10.95) == pytest.approx(11.0) and guard.holds == {ROBOT: 1}  # no whole step left
+    wall.t += 5.5
+    assert guard.limit(10.95) is None and guard.released == {ROBOT: 1}
+
+
+def test_a_strap_gone_quiet_is_released_until_its_next_sample() -> None:
+    wall = Wall()
+    guard = ClockGuard(hr_lag=2.0, max_hold=5.0, monotonic=wall)
+    guard.hr_sample(100.0, 100.0)
+    assert guard.limit(102.0) == pytest.approx(102.0)
+    wall.t += 6.0
+    assert guard.limit(102.0) is None and guard.released == {HR: 1}
+    guard.hr_sample(130.0, 130.0)  # back: held to it again
+    assert guard.limit(131.0) == pytest.approx(132.0)
