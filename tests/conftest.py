@@ -84,10 +84,21 @@ def ros_context():
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """The tier is the path: everything under an ``integration`` folder is marked ``integration``."""
+    """The tier is the path: everything under an ``integration`` folder is marked ``integration``.
+
+    Integration tests run first, whole sessions (tests/hri_physio_bringup/integration) first of all:
+    parallel workers start the longest work at once instead of ending on it.
+    """
+    def rank(item: pytest.Item) -> int:
+        parts = item.path.relative_to(TESTS).parts
+        if "integration" not in parts:
+            return 2
+        return 0 if parts[0] == "hri_physio_bringup" else 1
+
     for item in items:
-        if "integration" in item.path.relative_to(TESTS).parts:
+        if rank(item) < 2:
             item.add_marker(pytest.mark.integration)
+    items.sort(key=rank)  # stable: the order within each rank is pytest's
 
 
 def venv_bin(name: str) -> str:

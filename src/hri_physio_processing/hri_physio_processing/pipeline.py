@@ -132,7 +132,7 @@ class ProcessingPipeline:
         self.opener = StreamOpener(
             self.source, expected, timeout=cfg.resolve_timeout, retry=self.waits_for_input, log=self.log,
             stop=stop, clock=self._clock, backoff=self._backoff, log_period=self._log_period,
-            sleep=self._sleep,
+            sleep=self._sleep, on_attempt=self._waiting_for_input,
         )
         wait = (f"; waiting for it to appear ({cfg.resolve_timeout:g} s per attempt)"
                 if self.waits_for_input and self.source.scheme != "ros" else "")
@@ -153,6 +153,12 @@ class ProcessingPipeline:
         self.log.info(f"connected to {cfg.input}; {cfg.mode} windows of {cfg.window_seconds:g} s every "
                       f"{cfg.hop_seconds:g} s -> {self._outputs_label}/*")
         return True
+
+    def _waiting_for_input(self, attempts: int, why: str) -> None:
+        """Each attempt that found no input, on the status topic (the log says it once per period)."""
+        self.publish([StatusOutput({"t": self._last_t if math.isfinite(self._last_t) else None,
+                                    "event": "waiting_for_input", "input": self.cfg.input,
+                                    "attempts": attempts, "reason": why})])
 
     def step(self, stop: threading.Event, timeout: float = 0.1) -> bool:
         """Process whatever arrived; False when the input has ended (or was lost and a stop came)."""

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from helpers import wait_until
 from hri_physio_bridge.frames import Frame
 from hri_physio_bridge.receiver import ConfigError, PhysioReceiver, ReceiverConfig
 from hri_physio_bridge.streamers import (
@@ -113,11 +114,13 @@ class CountingSink(MemorySink):
     def __init__(self) -> None:
         super().__init__()
         self.count = 0
+        self.asked = 0  # how often the receiver asked how many listen
 
     def has_consumers(self) -> bool:
         return self.count > 0
 
     def consumer_count(self) -> int:
+        self.asked += 1
         return self.count
 
 
@@ -389,8 +392,7 @@ def test_request_stop_ends_the_wait_for_a_consumer(caplog: pytest.LogCaptureFixt
         rx.start()
     assert time.monotonic() - start < 2.0
     src.chunks.put(chunk(0, 4))
-    time.sleep(0.2)
-    assert rx.stats.received_samples == 0  # no threads were started
+    assert rx._threads == [] and rx.stats.received_samples == 0  # stopped before reading: no threads
     rx.stop()
     assert sink.closed
     assert log_lines(caplog, "stopped while waiting for a consumer on mem:sink")
@@ -440,8 +442,9 @@ def test_waits_for_min_consumers_before_reading(caplog: pytest.LogCaptureFixture
     with caplog.at_level(logging.INFO, logger="test"):
         t = threading.Thread(target=lambda: (rx.start(), started.set()))
         t.start()
-        time.sleep(0.3)
-        assert not started.is_set() and rx.stats.received_samples == 0  # one listener is not enough
+        # Asked again and again while one listens: it is waiting, and reads nothing meanwhile.
+        wait_until(lambda: sink.asked >= 3, 10, "the receiver to ask for its listeners three times")
+        assert not started.is_set() and rx.stats.received_samples == 0 and rx._threads == []
         sink.count = 2
         assert started.wait(2.0)
         t.join()

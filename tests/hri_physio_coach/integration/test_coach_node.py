@@ -149,13 +149,20 @@ def probe(ros_context: Any) -> Any:
 
 # --- start and stop -----------------------------------------------------------------------------
 def test_interactive_waits_for_start_on_stdin_and_stops_on_sigterm(probe: Probe) -> None:
+    from std_msgs.msg import String
+
     with NodeProcess("qt_physio_coach", "--interactive", "--ros-args", "-p", "hr_topic:=/test/coach/hr",
                      stdin=subprocess.PIPE) as coach:
-        coach.wait_for_output("waiting for 'start'")
-        wait_until(lambda: probe.node.count_subscribers(topics.COACH_CONTROL) > 0, 20,
-                   "the coach to subscribe")
-        time.sleep(1.0)
+        wait_until(lambda: probe.control.get_subscription_count() > 0, 20, "the coach to subscribe")
+        # An unknown line is counted, and the state after it is published on a tick that ran the start
+        # logic first: no start planned then proves the coach waits (it plans on its first tick otherwise).
+        probe.control.publish(String(data="hello"))
+        wait_until(lambda: any(st["control"]["received"] == 1 for st in probe.states), 20,
+                   "the state that counts the unknown line")
+        state = next(st for st in probe.states if st["control"]["received"] == 1)
+        assert (state["state"], state["start_at"]) == ("idle", None), state
         assert not probe.events("session_start"), "started before 'start'"
+        assert "waiting for 'start'" in coach.output
         assert coach.proc.stdin is not None
         coach.proc.stdin.write("start\n")
         coach.proc.stdin.flush()
@@ -188,7 +195,6 @@ def test_start_on_the_control_topic_and_sigint(probe: Probe) -> None:
 
     args = ("--interactive", "--ros-args", "-p", "hr_topic:=/test/coach/hr")
     with NodeProcess("qt_physio_coach", *args) as coach:
-        coach.wait_for_output("waiting for 'start'")
         wait_until(lambda: probe.control.get_subscription_count() > 0, 20, "the coach to subscribe")
         probe.control.publish(String(data="start"))
         wait_until(lambda: probe.events("session_start"), 20, "session_start after 'start' on /coach/control")
@@ -203,7 +209,6 @@ def test_every_control_line_of_a_burst_is_handled_and_counted(probe: Probe) -> N
     burst = 10_000
     args = ("--interactive", "--ros-args", "-p", "hr_topic:=/test/coach/hr")
     with NodeProcess("qt_physio_coach", *args) as coach:
-        coach.wait_for_output("waiting for 'start'")
         wait_until(lambda: probe.control.get_subscription_count() > 0, 20, "the coach to subscribe")
         publish_burst(probe.control, (String(data=f"jump {i}") for i in range(burst)))
         probe.control.publish(String(data="start"))  # the line after the burst is not lost either
@@ -228,7 +233,6 @@ def test_stop_on_the_control_topic_before_the_start_ends_the_node(probe: Probe) 
 
     args = ("--interactive", "--ros-args", "-p", "hr_topic:=/test/coach/hr")
     with NodeProcess("qt_physio_coach", *args) as coach:
-        coach.wait_for_output("waiting for 'start'")
         wait_until(lambda: probe.control.get_subscription_count() > 0, 20, "the coach to subscribe")
         probe.control.publish(String(data="stop"))
         assert coach.wait(30) == 0, coach.output
@@ -244,8 +248,6 @@ def test_two_coaches_on_one_domain_both_say_so_and_stop(probe: Probe) -> None:
     first = NodeProcess("qt_physio_coach", *args, "-p", "part_name:=First")
     second = NodeProcess("qt_physio_coach", *args, "-p", "part_name:=Second")
     with first, second:
-        for coach in (first, second):
-            coach.wait_for_output("waiting for 'start'")
         # Each coach's latched state reaching the probe shows that the probe has matched that
         # coach's endpoints, so its conflict event will reach the probe too.
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy

@@ -81,13 +81,21 @@ def _cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime + stime
 
 
-def test_an_lsl_input_still_to_appear_is_waited_for_idly(lsl_name: str) -> None:
-    args = ("--input", f"lsl:{lsl_name}/later", "--resolve-timeout", "0.2", "--output-prefix",
-            f"/test/{lsl_name.split('/')[0]}/later")
+def test_an_lsl_input_still_to_appear_is_waited_for_idly(lsl_name: str, collector) -> None:
+    prefix = f"/test/{lsl_name.split('/')[0]}/later"
+    out = Outputs(collector, prefix)
+    args = ("--input", f"lsl:{lsl_name}/later", "--resolve-timeout", "0.2", "--output-prefix", prefix)
     with NodeProcess("neurokit_processor", *args) as proc:
-        proc.wait_for_output("still waiting", 60)
-        cpu0, t0 = _cpu_seconds(proc.proc.pid), time.monotonic()
-        time.sleep(3.0)  # a window to measure in: an attempt every 0.2 s would log ~15 lines here
+
+        def attempts() -> int:
+            with out._lock:
+                return max((s["attempts"] for s in out.status if s.get("event") == "waiting_for_input"),
+                           default=0)
+
+        wait_until(lambda: attempts() >= 1, 60, lambda: f"a waiting_for_input status\n{proc.output}")
+        cpu0, t0, first = _cpu_seconds(proc.proc.pid), time.monotonic(), attempts()
+        # Three more attempts (each logged at once if the log were not rate-limited) to measure over.
+        wait_until(lambda: attempts() >= first + 3, 60, "three more attempts to open the input")
         cpu = (_cpu_seconds(proc.proc.pid) - cpu0) / (time.monotonic() - t0)
         assert proc.proc.poll() is None, proc.output
         assert proc.stop(signal.SIGINT) == 0, proc.output

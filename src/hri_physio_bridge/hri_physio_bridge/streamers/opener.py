@@ -9,6 +9,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable
 
 from hri_physio_bridge.rate_limit import RateLimitedLog
 from hri_physio_bridge.streamers.base import (
@@ -26,7 +27,8 @@ class StreamOpener:
 
     Each attempt waits up to ``timeout`` s inside the streamer. With ``retry``, attempts are
     separated by a :class:`Backoff` delay and "still waiting" is logged at most every
-    ``log_period`` s. Only :class:`StreamNotFoundError` and :class:`StreamLostError` are retried:
+    ``log_period`` s (``on_attempt`` hears of every attempt, for a status a node publishes). Only
+    :class:`StreamNotFoundError` and :class:`StreamLostError` are retried:
     a source that cannot exist (a missing file, a bad address) is raised at once. A stop raises
     :class:`OpenCancelled`.
     """
@@ -44,6 +46,7 @@ class StreamOpener:
         backoff: Backoff | None = None,
         log_period: float = 30.0,
         sleep: Sleeper | None = None,
+        on_attempt: Callable[[int, str], None] | None = None,
     ) -> None:
         self.streamer, self.expected, self.timeout, self.retry = streamer, expected, timeout, retry
         self.log, self.stop = log, stop
@@ -51,6 +54,8 @@ class StreamOpener:
         self._sleep = sleep or sleeper_for(stop)
         self._waiting = RateLimitedLog(log.warning, period=log_period, monotonic=clock)
         self.attempts = 0
+        #: Called after each attempt that found no stream (attempts so far, why): a node reports it.
+        self.on_attempt = on_attempt
 
     def open(self) -> StreamSpec:
         self.backoff.reset()
@@ -68,5 +73,7 @@ class StreamOpener:
                 if not self.retry:
                     raise
                 self._waiting.report("absent", f"{exc}; still waiting", "attempt(s)")
+                if self.on_attempt is not None:
+                    self.on_attempt(self.attempts, str(exc))
             if self._sleep(self.backoff.next_delay()):
                 raise OpenCancelled(f"stopped while waiting for {self.streamer.uri}")

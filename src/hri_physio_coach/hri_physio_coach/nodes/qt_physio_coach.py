@@ -126,7 +126,7 @@ class QtPhysioCoachNode(ManagedNode):
 
     def state(self) -> dict[str, Any]:
         """The coach's state plus the node's: control lines handled and any conflict found."""
-        return {**self.coach.state(), "control": dict(self.control.counts),
+        return {**self.coach.state(), "control": dict(self.control.counts), "start_at": self.control.start_at,
                 "conflict": self.conflict["conflict"] if self.conflict else None}
 
     def _finish(self) -> None:
