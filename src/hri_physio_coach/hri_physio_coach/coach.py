@@ -37,22 +37,10 @@ from hri_physio_coach.hr_input import HeartRateMonitor
 from hri_physio_coach.ladder import SpeedLadder
 from hri_physio_coach.media_names import tempo_from_name
 from hri_physio_coach.paths import default_routine_file
+from hri_physio_coach.policies import types as act
 from hri_physio_coach.policies.adapter import Adapter
 from hri_physio_coach.policies.registry import make_policy
-from hri_physio_coach.policies.types import (
-    AT_LIMIT,
-    CHANGE_ACTIVITY,
-    ENCOURAGE,
-    GATED,
-    HOLD,
-    OUT_OF_REACH,
-    SCHEDULED_SLOW_DOWN,
-    SLOW_DOWN,
-    SPEED_UP,
-    Controls,
-    Decision,
-    RuleInput,
-)
+from hri_physio_coach.policies.types import Controls, Decision, RuleInput
 from hri_physio_coach.routine import Action, Activity, Phase, Routine, load_routine
 from hri_physio_coach.zones import HeartRateZone, tanaka_hr_max
 from qt_controller.commands import (
@@ -564,19 +552,20 @@ class ExerciseCoach(Listener):
 
     def _speak_decision(self, decision: Decision) -> None:
         cfg, action = self.cfg, decision.action
-        if action == GATED:
+        if action == act.GATED:
             return  # nothing about pace without a trustworthy heart rate
-        if action == SPEED_UP:
+        if action == act.SPEED_UP:
             lines = cfg.speech_faster
-        elif action in (SLOW_DOWN,) or (action == AT_LIMIT and decision.proposed < 0):
+        elif action in (act.SLOW_DOWN,) or (action == act.AT_LIMIT and decision.proposed < 0):
             lines = cfg.speech_slower
-        elif action == SCHEDULED_SLOW_DOWN:
+        elif action == act.SCHEDULED_SLOW_DOWN:
             lines = cfg.speech_cooldown
-        elif action in (ENCOURAGE, HOLD, AT_LIMIT) or (action == CHANGE_ACTIVITY and decision.delta == 0):
+        elif (action in (act.ENCOURAGE, act.HOLD, act.AT_LIMIT)
+              or (action == act.CHANGE_ACTIVITY and decision.delta == 0)):
             lines = cfg.speech_motivation
-        elif action == CHANGE_ACTIVITY:
+        elif action == act.CHANGE_ACTIVITY:
             lines = cfg.speech_faster if decision.delta > 0 else cfg.speech_slower
-        elif action == OUT_OF_REACH:
+        elif action == act.OUT_OF_REACH:
             self._say_out_of_reach(decision)
             return
         else:
@@ -646,7 +635,7 @@ class ExerciseCoach(Listener):
 
     def _say_out_of_reach(self, decision: Decision) -> None:
         """Once per kind: the zone cannot be reached with the controls at hand (event + a line)."""
-        notice = decision.notice or OUT_OF_REACH
+        notice = decision.notice or act.OUT_OF_REACH
         if notice in self._noticed:
             return
         self._noticed.add(notice)
