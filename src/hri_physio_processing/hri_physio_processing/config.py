@@ -77,6 +77,10 @@ class ProcessorConfig(NodeConfig):
                                      "(ecg_peaks correct_artifacts)")
     resolve_timeout: float = option(10.0, "how long one attempt waits for an LSL input to appear; "
                                     "attempts repeat (with backoff) until it does", unit="s", ge=0)
+    drain_timeout: float = option(5.0, "at a stop, the most time spent processing the frames already "
+                                  "received, plus drain_per_frame for each (what is left is an error)",
+                                  unit="s", ge=0)
+    drain_per_frame: float = option(0.02, "the time a stop allows per frame already received", unit="s", ge=0)
     wait_for_consumers: float = option(0.0, "how long to wait for a listener on every ROS output before "
                                        "reading the input (topics are volatile: a log replay would "
                                        "otherwise lose its first windows; 0 = no wait)", unit="s", ge=0)

@@ -87,6 +87,7 @@ class ProcessingPipeline:
         self._lost_reported = 0
         self._lost_reported_at = -math.inf
         self._last_t = math.nan  # source time of the newest sample taken off the input
+        self.drained = 0  # frames processed after a stop (received before it)
 
     @property
     def waits_for_input(self) -> bool:
@@ -107,20 +108,43 @@ class ProcessingPipeline:
                 if not self.step(stop):
                     self.log.info(f"{self.cfg.input} ended")
                     break
+            left = self.drain()
             self.publish(self.processor.finish())
-            left = self.source.backlog()
             if left:
-                self.log.warning(f"stopped with {left} input frame(s) received but not processed")
+                self.log.error(f"stopped with {left} input frame(s) received but not processed "
+                               f"(drain_timeout {self.cfg.drain_timeout:g} s)")
             self.publish([StatusOutput({
                 "t": self._last_t if math.isfinite(self._last_t) else None, "event": "stopped",
                 "mode": self.cfg.mode, "ok": not (left or self.source.lost_messages),
-                "input": self.input_state(), "stats": self.processor.stats.as_dict()})])
+                "input": {**self.input_state(), "backlog": left}, "drained_frames": self.drained,
+                "stats": self.processor.stats.as_dict()})])
         except StreamerError as exc:
             self.log.error(str(exc))
             return 1
         finally:
             self.source.close()
         return 0
+
+    def drain(self) -> int:
+        """Process the frames received before a stop; the number left when ``drain_timeout`` ran out.
+
+        Frames that arrive after the stop are not taken (a stop ends taking new input, not the work
+        already received): the count queued at the stop is what is drained.
+        """
+        queued = self.source.backlog()
+        self.drained = 0
+        if queued:
+            self.log.info(f"stopping: processing the {queued} input frame(s) already received")
+        deadline = self._clock() + self.cfg.drain_timeout + self.cfg.drain_per_frame * queued
+        while self.drained < queued and self._clock() < deadline:
+            frame = self.source.receive(0.0)
+            if frame is None:
+                break
+            self.drained += 1
+            if frame.num_samples:
+                self._last_t = float(frame.timestamps[-1])
+            self.push(frame)
+        return queued - self.drained
 
     def open(self, stop: threading.Event) -> bool:
         """Connect to the input (waiting for a stream to appear); False when stopped first."""

@@ -256,3 +256,52 @@ def test_a_clean_run_ends_with_an_ok_stopped_event(log, mitdb) -> None:
     stopped = out[-1].payload
     assert stopped["event"] == "stopped" and stopped["ok"] and stopped["t"] == pytest.approx(112 - 1 / FS)
     assert stopped["input"]["samples_in"] == 12 * FS and stopped["input"]["dropped_frames"] == 0
+
+
+class SlowQueuedInput(QueuedInput):
+    """Queued frames taking ``cost`` s of the fake clock each to take off the input."""
+
+    def __init__(self, clock: FakeClock, frames: list[Frame], cost: float) -> None:
+        super().__init__(clock, frames, lost_at={})
+        self.cost = cost
+
+    def receive(self, timeout: float = 0.1) -> Frame | None:
+        self.clock.t += self.cost
+        return super().receive(timeout)
+
+
+@pytest.mark.parametrize("cost,left", [(0.001, 0), (1.0, 200 - 17)])
+def test_a_stop_processes_what_was_received_within_the_drain_timeout(log, mitdb, cost: float,
+                                                                      left: int) -> None:
+    logger, _ = log
+    stop = threading.Event()
+    clock = FakeClock(stop)
+    out: list[Output] = []
+    frames = ecg_frames(mitdb, 20, chunk=13)  # 200 frames queued when the stop comes
+    source = SlowQueuedInput(clock, frames, cost)
+    cfg = ProcessorConfig.from_mapping({**config().as_dict(), "drain_timeout": 15.0, "drain_per_frame": 0.01})
+    pipeline = ProcessingPipeline(cfg, source, out.append, logger, clock=clock, sleep=clock.sleep)
+    assert pipeline.open(stop)
+    # Deadline 15 s + 0.01 s x 200 = 17 s: at 1 s a frame, 17 frames fit.
+    assert pipeline.drain() == left and pipeline.drained == 200 - left
+    assert pipeline.processor.stats.samples_in == 13 * (200 - left)
+    windows = [o.payload for o in out if isinstance(o, StatusOutput) and o.payload["event"] == "window"]
+    assert len(windows) == (3 if left == 0 else 0)  # 20 s of ECG: windows ending at 10, 15, 20 s
+
+
+def test_the_stopped_event_counts_what_was_drained_and_an_error_names_what_was_left(log, mitdb) -> None:
+    logger, rec = log
+    stop = threading.Event()
+    clock = FakeClock(stop)
+    out: list[Output] = []
+    source = SlowQueuedInput(clock, ecg_frames(mitdb, 20, chunk=13), 1.0)
+    cfg = ProcessorConfig.from_mapping({**config().as_dict(), "drain_timeout": 3.0, "drain_per_frame": 0.0})
+    pipeline = ProcessingPipeline(cfg, source, out.append, logger, clock=clock, sleep=clock.sleep)
+    # The loop takes nothing before the stop: the stop finds all 200 frames queued.
+    pipeline.step = lambda stop_event, timeout=0.1: (stop.set(), True)[1]  # type: ignore[method-assign]
+    assert pipeline.run(stop) == 0
+    stopped = [o.payload for o in out if isinstance(o, StatusOutput)][-1]
+    assert stopped["event"] == "stopped" and not stopped["ok"]
+    assert (stopped["drained_frames"], stopped["input"]["backlog"]) == (3, 197)
+    errors = rec.at(logging.ERROR)
+    assert len(errors) == 1 and "stopped with 197 input frame(s) received but not processed" in errors[0]
