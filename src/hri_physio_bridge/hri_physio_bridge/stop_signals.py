@@ -12,6 +12,7 @@ a watcher thread, which sets the event and calls ``on_stop`` like any other thre
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import os
 import signal
@@ -63,4 +64,16 @@ def install_stop_handlers(on_stop: Callable[[str], None] | None = None) -> threa
     _installed.append(write_fd)
     for s in STOP_SIGNALS:
         signal.signal(s, _do_nothing)
+    atexit.register(_ignore_stop_signals)
     return stop
+
+
+def _ignore_stop_signals() -> None:
+    """At exit: a late SIGINT/SIGTERM (a launcher's second one) must not turn a clean exit into -15.
+
+    Python restores the default handlers as it finalizes; an ignored signal stays ignored. A
+    process that hangs later on is still ended by the launcher's SIGABRT and SIGKILL.
+    """
+    for s in STOP_SIGNALS:
+        with contextlib.suppress(ValueError):  # not the main thread
+            signal.signal(s, signal.SIG_IGN)

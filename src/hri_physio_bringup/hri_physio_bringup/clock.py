@@ -11,7 +11,11 @@ faster than real life, where every node keeps up) while the loop lags behind it:
   come through LSL and the receiver (its source time mapped onto sim time);
 * robot commands: never more than ``reply_lag`` past a command the controller has not answered yet;
 * music: never more than ``reply_lag`` past an audio request the streamer has not settled yet (what
-  the person follows is the streamer's status).
+  the person follows is the streamer's status);
+* the coach's rule updates: never up to the end of a rule update's wait for late heart rate
+  (``hr_wait``) before the coach has decided it (its ``/coach/state`` says which one is next). Here
+  the clock stops rather than slows: a coach process starved for a moment would otherwise handle a
+  burst of ``/clock`` before the heart rate queued behind it, and decide without it.
 
 A hold lasts at most ``max_hold`` wall seconds (a strap that stopped, a crashed controller): then
 the clock goes on at full speed and the release is counted. Every hold is counted by its cause,
@@ -31,7 +35,7 @@ from dataclasses import dataclass, field
 #: (coach tick, participant update and the mock's joint states), or timers skip periods.
 CLOCK_STEP = 0.1
 #: Causes of a hold (keys of :attr:`ClockGuard.holds` and :attr:`ClockGuard.released`).
-HR, ROBOT, MEDIA = "heart_rate", "robot_reply", "media_status"
+HR, ROBOT, MEDIA, DECISION = "heart_rate", "robot_reply", "media_status", "coach_decision"
 
 
 class SimClock:
@@ -54,13 +58,14 @@ class SimClock:
         #: Wall seconds the clock lost to limits (what it would have run at ``speed``, less what it ran).
         self.held_wall = 0.0
 
-    def due_steps(self, limit: float | None = None) -> list[float]:
-        """The clock values to publish now to keep up with the wall clock (at real time past ``limit``)."""
+    def due_steps(self, limit: float | None = None, hard: bool = False) -> list[float]:
+        """The clock values to publish now to keep up with the wall clock: at real time past ``limit``,
+        or (``hard``) not past it at all."""
         wall = self._monotonic()
         elapsed, self._wall = max(0.0, wall - self._wall), wall
         free = self._position + elapsed * self.speed
         if limit is not None and free > limit:
-            slow = self._position + elapsed * self.creep
+            slow = self._position if hard else self._position + elapsed * self.creep
             reached = max(min(free, limit), slow)
             self.held_wall += (free - reached) / self.speed
             free = reached
@@ -123,10 +128,14 @@ class ClockGuard:
     _offset: float = -math.inf  # source clock minus sim time (the largest seen: the least delayed value)
     _newest_source: float = -math.inf
     _hr_released: bool = False
+    hr_wait: float = 3.0  # the coach's wait for late heart rate at a rule update (its option)
+    _decision: float | None = None  # the coach's next rule update not decided yet
+    _released_decision: float | None = None
     _commands: InFlight = field(default_factory=InFlight)  # robot commands and the controller's replies
     _media: InFlight = field(default_factory=InFlight)  # audio requests and the streamer's settled count
     _holding: str | None = None
     _since: float = 0.0
+    _hard: bool = False
 
     # --- what the loop did ---------------------------------------------------------------------
     def hr_sample(self, source_t: float, sim_now: float) -> None:
@@ -148,6 +157,10 @@ class ClockGuard:
         if math.isfinite(sim_now):
             self._media.sent(sim_now)
 
+    def coach_decision(self, next_decision: float | None) -> None:
+        """The coach's state: the time of its next rule update not decided yet (None: none ahead)."""
+        self._decision = next_decision
+
     def media_settled(self, settled: int) -> None:
         """The streamer's status: ``settled`` requests started, failed or superseded so far."""
         self._media.answered(total=settled)
@@ -161,16 +174,26 @@ class ClockGuard:
             oldest = flight.oldest()
             if oldest is not None:
                 out[cause] = oldest + self.reply_lag
+        if self._decision is not None and self._decision != self._released_decision:
+            out[DECISION] = self._decision + self.hr_wait - CLOCK_STEP
         return out
+
+    @property
+    def hard(self) -> bool:
+        """Whether the limit :meth:`limit` last returned stops the clock (a coach decision) or slows it
+        (once the clock reaches it)."""
+        return self._hard
 
     def limit(self, clock_t: float) -> float | None:
         """How far the clock may run at full speed now (None: no limit), given it stands at ``clock_t``."""
         limits = self._limits()
+        self._hard = False
         if not limits:
             self._holding = None
             return None
         cause = min(limits, key=limits.__getitem__)
         limit = limits[cause]
+        self._hard = cause == DECISION
         if limit >= clock_t + CLOCK_STEP - 1e-9:  # the clock can take its next step: not held
             self._holding = None
             return limit
@@ -189,6 +212,8 @@ class ClockGuard:
         self.released[cause] += 1
         if cause == HR:
             self._hr_released = True  # until the next sample
+        elif cause == DECISION:
+            self._released_decision = self._decision  # the coach gives up on late heart rate itself
         else:
             (self._commands if cause == ROBOT else self._media).give_up_oldest()
 

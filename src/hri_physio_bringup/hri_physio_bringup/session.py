@@ -143,6 +143,9 @@ class ClockAndWatcher(BackgroundNode):
 
         def set_state(data: dict) -> None:
             view.state = data
+            if guard is not None:
+                decision = data.get("next_decision")
+                guard.coach_decision(float(decision) if isinstance(decision, int | float) else None)
 
         def set_model(data: dict) -> None:
             view.model_hr = float(data.get("hr_model", math.nan))
@@ -196,7 +199,8 @@ class ClockAndWatcher(BackgroundNode):
         """Publish the clock values that are due, no further than the guard allows."""
         with self.lock:
             limit = None if self.guard is None else self.guard.limit(clock.t)
-        for t in clock.due_steps(limit):
+            hard = self.guard is not None and self.guard.hard
+        for t in clock.due_steps(limit, hard):
             self.publish_clock(t)
 
     def publish_clock(self, t: float) -> None:
@@ -304,7 +308,7 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
     """Start the nodes, wait for them, run the routine to its end (or a stop); returns the sim clock."""
     receivers = [n.name for n in plan.nodes if n.script == "physio_receiver"]
     # A simulated participant's loop can be held to the clock; a real strap lives in real time.
-    guard = None if options.polar else ClockGuard()
+    guard = None if options.polar else ClockGuard(hr_wait=plan.coach.hr_wait)
     watcher = ClockAndWatcher(view, plan.hr_topic, receivers, plan.listeners, guard)
     # The clock runs at --speed from the beginning: before 'start' the participant sits and the
     # processor fills its first window (60 s of ECG) without keeping the launcher waiting.

@@ -221,7 +221,19 @@ class ExerciseCoach(Listener):
             "adaptation": "paused" if self.monitor.lost else "active", "last_hr": self.monitor.last_hr,
             "performing": self.choice.current.name if self.choice.current else None,
             "activity_level": self.adapter.level,
+            "next_decision": self.next_decision(),
         }
+
+    def next_decision(self) -> float | None:
+        """The time of the next rule update not decided yet (one waiting for late heart rate first).
+
+        It is decided at that time, or up to ``hr_wait`` later once the heart rate taken before it has
+        come; a launcher driving sim time reads it from /coach/state so as never to run the clock past
+        that deadline before the coach, maybe slowed by a busy machine, has decided.
+        """
+        if self._pending_rule is not None:
+            return self._pending_rule[0]
+        return self.engine.next_hook_due(RULE_UPDATE)
 
     # --- events and commands -----------------------------------------------------------------
     def _emit(self, event: Event) -> None:

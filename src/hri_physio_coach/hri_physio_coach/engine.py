@@ -205,6 +205,11 @@ class ScenarioEngine:
         self.now = max(self.now, now)
         return ran
 
+    def next_hook_due(self, name: str) -> float | None:
+        """When hook ``name`` runs next (None: not scheduled in the phase under way)."""
+        timer = self._hook_timers.get(name)
+        return None if timer is None or timer.cancelled or self.state != RUNNING else timer.time
+
     def next_due(self) -> float | None:
         """When the next pending timer is due (None: nothing pending), for event-driven drivers."""
         while self._queue and self._queue[0].cancelled:

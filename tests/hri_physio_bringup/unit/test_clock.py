@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from hri_physio_bringup.clock import CLOCK_STEP, HR, MEDIA, ROBOT, ClockGuard, SimClock
+from hri_physio_bringup.clock import CLOCK_STEP, DECISION, HR, MEDIA, ROBOT, ClockGuard, SimClock
 
 
 class Wall:
@@ -126,3 +126,29 @@ def test_a_strap_gone_quiet_is_released_until_its_next_sample() -> None:
     assert guard.limit(102.0) is None and guard.released == {HR: 1}
     guard.hr_sample(130.0, 130.0)  # back: held to it again
     assert guard.limit(131.0) == pytest.approx(132.0)
+
+
+def test_the_clock_stops_before_a_rule_updates_wait_ends_until_the_coach_has_decided() -> None:
+    wall = Wall()
+    guard = ClockGuard(hr_wait=3.0, max_hold=5.0, monotonic=wall)
+    guard.coach_decision(540.0)
+    assert guard.limit(530.0) == pytest.approx(542.9) and guard.hard and not guard.holds  # far off: no hold
+    assert guard.limit(542.9) == pytest.approx(542.9) and guard.hard and guard.holds == {DECISION: 1}
+    clock = SimClock(start=542.9, speed=20.0, monotonic=wall)
+    wall.t += 1.0
+    assert clock.due_steps(guard.limit(clock.t), guard.hard) == []  # stopped, not slowed
+    guard.coach_decision(570.0)  # decided: the next one is 30 s on
+    assert guard.limit(542.9) == pytest.approx(572.9) and guard.holds == {DECISION: 1}
+    guard.coach_decision(None)
+    assert guard.limit(542.9) is None
+
+
+def test_a_coach_that_never_decides_is_given_up_on_after_max_hold() -> None:
+    wall = Wall()
+    guard = ClockGuard(hr_wait=3.0, max_hold=5.0, monotonic=wall)
+    guard.coach_decision(100.0)
+    assert guard.limit(102.9) == pytest.approx(102.9)
+    wall.t += 6.0
+    assert guard.limit(102.9) is None and guard.released == {DECISION: 1}
+    guard.coach_decision(130.0)
+    assert guard.limit(102.9) == pytest.approx(132.9)

@@ -142,6 +142,9 @@ class QtPhysioCoachNode(ManagedNode):
             return
         with self._lock:
             self.control.on_hr(frame, self._now())
+        # A rule update waiting for this heart rate decides now, not at the next tick: under a launcher
+        # that holds sim time until the coach has decided, the next tick might not come.
+        self._tick()
 
     def _on_reply(self, msg: String) -> None:
         try:
