@@ -86,17 +86,14 @@ def ros_context():
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """The tier is the path: everything under an ``integration`` folder is marked ``integration``.
 
-    Integration tests run first, whole sessions (tests/hri_physio_bringup/integration) first of all:
-    parallel workers start the longest work at once instead of ending on it.
+    Integration tests run first (a parallel run then starts its longest work at once instead of
+    ending on it); scripts/test runs the whole-session tests on their own, one after another.
     """
     def rank(item: pytest.Item) -> int:
-        parts = item.path.relative_to(TESTS).parts
-        if "integration" not in parts:
-            return 2
-        return 0 if parts[0] == "hri_physio_bringup" else 1
+        return 0 if "integration" in item.path.relative_to(TESTS).parts else 1
 
     for item in items:
-        if rank(item) < 2:
+        if rank(item) == 0:
             item.add_marker(pytest.mark.integration)
     items.sort(key=rank)  # stable: the order within each rank is pytest's
 

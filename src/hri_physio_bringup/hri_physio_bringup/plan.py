@@ -228,4 +228,12 @@ def plan_session(options: SessionConfig, folder: SessionFolder, device_id: str,
                  (topics.QT_SPEECH_SAY, MOCK), (topics.AUDIO_REQUEST, AUDIO), (topics.VIDEO_REQUEST, VIDEO)]
     if not options.polar:
         listeners += [(topics.QT_COMMANDS, PARTICIPANT), (topics.AUDIO_STATUS, PARTICIPANT)]
+    if record:
+        # The recorder subscribes to a topic once it discovers it: the session starts only once it records
+        # the topics whose first messages matter (the coach's session_start, the first commands).
+        capture = f"{RECORDER}_capture"
+        recorded = [topics.COACH_EVENTS, topics.COACH_STATE, topics.QT_COMMANDS, topics.AUDIO_STATUS]
+        if not options.polar:
+            recorded.append(topics.PARTICIPANT_STATE)
+        listeners += [(topic, capture) for topic in recorded]
     return SessionPlan(coach, duration, device_id, tuple(nodes), tuple(listeners))

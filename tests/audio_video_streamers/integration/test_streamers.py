@@ -120,10 +120,13 @@ def test_streamers_play_what_is_requested_and_report_it(ros_context: Any, tmp_pa
             assert after["source"] == "beat:120"
 
             # Video: the splash by default, previews moving; an activity at the music's tempo.
-            wait_until(lambda: len(probe.previews) >= 3, 30, "three previews")
+            wait_until(lambda: len(probe.previews) >= 6, 30, "six previews")
             with probe.lock:
-                (t0, first), (t1, second) = probe.previews[1], probe.previews[2]
-            assert first.shape == (240, 320, 3) and t1 - t0 >= 0.5 - 1e-3  # 2 Hz on the node's clock
+                (t0, first), (_, second) = probe.previews[1], probe.previews[2]
+                t5 = probe.previews[5][0]
+            # 2 Hz on the node's clock: each preview is the frame nearest its due time (half a frame
+            # either side) and a busy machine may stamp one late, so the rate is checked over 4 intervals.
+            assert first.shape == (240, 320, 3) and (t5 - t0) / 4 >= 0.45, (t0, t5)
             assert (green_mask(first) != green_mask(second)).sum() > 100
             probe.wait_video("the splash offscreen",
                              lambda s: s.get("source") == "splash" and s["display"] == "offscreen")

@@ -208,3 +208,14 @@ def test_ecg_frames_carry_a_tenth_of_a_wall_second_at_any_speed(tmp_path: Path, 
     p, _ = plan(tmp_path, speed=speed)
     assert p.node(ECG_RECEIVER).config.output_frame == frame
     assert p.node(HR_RECEIVER).config.output_frame == 1
+
+
+def test_the_session_starts_once_the_recorder_records_what_its_first_messages_need(tmp_path: Path) -> None:
+    from hri_physio_bridge import topics
+
+    p, _ = plan(tmp_path)
+    capture = {topic for topic, node in p.listeners if node == "physio_recorder_capture"}
+    assert capture == {topics.COACH_EVENTS, topics.COACH_STATE, topics.QT_COMMANDS, topics.AUDIO_STATUS,
+                       topics.PARTICIPANT_STATE}
+    p, _ = plan(tmp_path, no_record=True)
+    assert all(node != "physio_recorder_capture" for _topic, node in p.listeners)
