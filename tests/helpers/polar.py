@@ -12,6 +12,10 @@ from hri_physio_bridge.polar.config import PolarConfig
 from hri_physio_bridge.polar.fake import FakeClock, FakePolarDevice, FakeScanner, fake_client_factory
 from hri_physio_bridge.polar.output import MemorySink
 from hri_physio_bridge.polar.session import PolarSession
+from hri_physio_bridge.polar.virtual_time import run_virtual
+
+#: How often (virtual seconds) the driver checks its stop condition.
+POLL = 0.05
 
 
 @dataclass
@@ -37,10 +41,11 @@ def run_session(
     sink: Any | None = None,
     *,
     stop_when: Callable[[PolarSession, list[dict[str, Any]]], bool] | None = None,
-    max_steps: int = 2_000_000,
+    max_seconds: float = 100_000.0,
     **options: Any,
 ) -> Run:
-    """Run a session until ``stop_when`` holds (default: the first device's timeline is played)."""
+    """Run a session in virtual time until ``stop_when`` holds (default: the first device's timeline
+    is played), checked every ``POLL`` virtual seconds; fails after ``max_seconds`` of virtual time."""
     config = PolarConfig(**options)
     sink = sink if sink is not None else MemorySink()
     sleeps: list[float] = []
@@ -72,15 +77,14 @@ def run_session(
         stop = asyncio.Event()
         task = asyncio.ensure_future(session.run(stop))
         done = stop_when or (lambda _s, _e: devices[0].finished)
-        steps = 0
+        deadline = clock() + max_seconds
         while not task.done() and not done(session, events):
-            await asyncio.sleep(0)
-            steps += 1
-            assert steps < max_steps, (
+            await asyncio.sleep(POLL)
+            assert clock() < deadline, (
                 f"session did not reach the end; state {session.state}, events {events[-5:]}"
             )
         stop.set()
         status = await task
         return Run(status, session, sink, devices, events, sleeps)
 
-    return asyncio.run(main())
+    return run_virtual(main(), clock)

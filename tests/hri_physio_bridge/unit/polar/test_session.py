@@ -33,6 +33,7 @@ from hri_physio_bridge.polar.output import MemorySink
 from hri_physio_bridge.polar.protocol import Measurement
 from hri_physio_bridge.polar.session import PolarSession
 from hri_physio_bridge.polar.synthetic import synthetic_h10
+from hri_physio_bridge.polar.virtual_time import run_virtual
 
 NAME = "Polar H10 0A1B2C3D"
 
@@ -311,7 +312,7 @@ def test_capture_then_replay_gives_the_same_samples(tmp_path: Path) -> None:
         await task
         return session
 
-    recorded = asyncio.run(record())
+    recorded = run_virtual(record(), clock)
     capture.close()
     lines = (tmp_path / "session.jsonl").read_text().splitlines()
     assert json.loads(lines[0])["format"] == "hri_physio.polar.capture"
