@@ -12,10 +12,35 @@ from hri_physio_bridge.polar.config import PolarConfig
 from hri_physio_bridge.polar.fake import FakeClock, FakePolarDevice, FakeScanner, fake_client_factory
 from hri_physio_bridge.polar.output import MemorySink
 from hri_physio_bridge.polar.session import PolarSession
+from hri_physio_bridge.polar.synthetic import SyntheticH10, synthetic_h10
 from hri_physio_bridge.polar.virtual_time import run_virtual
+
+NAME = "Polar H10 0A1B2C3D"
+#: FakePolarDevice options that h10() passes to the device (the rest go to synthetic_h10).
+DEVICE_OPTIONS = (
+    "disconnect_after", "connect_failures", "pairing_required", "stop_indication_after", "start_status",
+    "visible", "start_params", "mtu", "invalid_mtu_answers", "unnamed_errors", "stall_after", "stall_heals",
+    "start_delays",
+)
 
 #: How often (virtual seconds) the driver checks its stop condition.
 POLL = 0.05
+
+
+def h10(clock: FakeClock, seconds: float = 30.0, **kwargs: Any) -> tuple[FakePolarDevice, SyntheticH10]:
+    """A fake H10 streaming ``seconds`` of synthetic data; device faults by name (``DEVICE_OPTIONS``)."""
+    device_options = {k: kwargs.pop(k) for k in DEVICE_OPTIONS if k in kwargs}
+    syn = synthetic_h10(seconds, **kwargs)
+    device = FakePolarDevice(
+        NAME, features=syn.features, settings=syn.settings, timeline=syn.timeline, clock=clock,
+        **device_options,
+    )
+    return device, syn
+
+
+def writes(device: FakePolarDevice) -> list[str]:
+    """The hex of every write the device received, in order."""
+    return [op[2] for op in device.operations if op[0] == "write"]
 
 
 @dataclass

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from helpers.polar import run_session
+from helpers.polar import NAME, h10, run_session, writes
 from hri_physio_bridge.polar import control_point as cp
 from hri_physio_bridge.polar.ble import BleUnavailableError
 from hri_physio_bridge.polar.capture import CaptureWriter, read_capture
@@ -32,39 +32,7 @@ from hri_physio_bridge.polar.gatt import HEART_RATE_MEASUREMENT, PMD_CONTROL_POI
 from hri_physio_bridge.polar.output import MemorySink
 from hri_physio_bridge.polar.protocol import Measurement
 from hri_physio_bridge.polar.session import PolarSession
-from hri_physio_bridge.polar.synthetic import synthetic_h10
 from hri_physio_bridge.polar.virtual_time import run_virtual
-
-NAME = "Polar H10 0A1B2C3D"
-
-
-def h10(clock: FakeClock, seconds: float = 30.0, **kwargs) -> tuple[FakePolarDevice, object]:
-    device_options = {
-        k: kwargs.pop(k)
-        for k in (
-            "disconnect_after",
-            "connect_failures",
-            "pairing_required",
-            "stop_indication_after",
-            "start_status",
-            "visible",
-        )
-        if k in kwargs
-    }
-    syn = synthetic_h10(seconds, **kwargs)
-    device = FakePolarDevice(
-        NAME,
-        features=syn.features,
-        settings=syn.settings,
-        timeline=syn.timeline,
-        clock=clock,
-        **device_options,
-    )
-    return device, syn
-
-
-def writes(device: FakePolarDevice) -> list[str]:
-    return [op[2] for op in device.operations if op[0] == "write"]
 
 
 class CountingSink(MemorySink):
