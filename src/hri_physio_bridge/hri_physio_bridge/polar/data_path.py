@@ -117,6 +117,7 @@ class DataPath:
         self._last_stamp: dict[str, int] = {}
         self.mapper = DeviceClockMapper(latency_ns=latency_ns)
         self._drift_reported = False
+        self.reopen_wait_s = REOPEN_WAIT_S
 
     # ------------------------------------------------------------------------------------------
     def stream_stats(self, kind: StreamKind, rate: float) -> StreamStats:
@@ -215,7 +216,7 @@ class DataPath:
             had_consumers = self.sink.consumers(kind.key)
             self.declare(kind, verdict.rate, anew=True)
             if had_consumers:
-                stream.hold_until = self.clock() + REOPEN_WAIT_S
+                stream.hold_until = self.clock() + self.reopen_wait_s
 
     def _release_held(self, stream: ActiveStream) -> None:
         if stream.check is not None or not stream.held:
