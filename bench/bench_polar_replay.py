@@ -31,7 +31,13 @@ import pylsl
 
 from hri_physio_bridge.polar.capture import read_capture
 from hri_physio_bridge.polar.config import PolarConfig
-from hri_physio_bridge.polar.fake import FakeClock, FakePolarDevice, FakeScanner, fake_client_factory
+from hri_physio_bridge.polar.fake import (
+    FakeClock,
+    FakePolarDevice,
+    FakeScanner,
+    fake_client_factory,
+    play_through,
+)
 from hri_physio_bridge.polar.gatt import PMD_DATA
 from hri_physio_bridge.polar.lsl_output import LslSink
 from hri_physio_bridge.polar.output import MemorySink, Sink
@@ -67,12 +73,7 @@ async def stream(device: FakePolarDevice, sink: Sink, clock) -> int:
         FakeScanner([device], clock if isinstance(clock, FakeClock) else None),
         fake_client_factory, sink, clock=clock, watchdog=False,
     )
-    session.listeners.append(lambda e: device.release() if e.get("state") == "streaming" else None)
-    stop = asyncio.Event()
-    task = asyncio.ensure_future(session.run(stop))
-    await device.wait_finished()
-    stop.set()
-    await task
+    await play_through(session, device)
     return session.status()["streams"]["ecg"]["samples"]
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import random
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -113,3 +114,37 @@ def run_session(
         return Run(status, session, sink, devices, events, sleeps)
 
     return run_virtual(main(), clock)
+
+
+class SessionThread:
+    """A session on real time and a real sink, run on an asyncio loop in a thread (LSL tests).
+
+    ``with SessionThread(session) as runner:`` starts it; leaving the block stops it, joins the
+    thread and closes the sink; ``runner.result`` then holds the exit status.
+    """
+
+    def __init__(self, session: PolarSession) -> None:
+        self.session = session
+        self.loop = asyncio.new_event_loop()
+        self.streaming = threading.Event()
+        self.result: list[int] = []
+        self._stop = asyncio.Event()
+        session.listeners.append(lambda e: self.streaming.set() if e.get("state") == "streaming" else None)
+        self._thread = threading.Thread(
+            target=lambda: self.result.append(self.loop.run_until_complete(session.run(self._stop))),
+            daemon=True,
+        )
+
+    def call(self, function: Callable[[], Any]) -> None:
+        """Run ``function`` on the session's loop (e.g. a fake device's ``release``)."""
+        self.loop.call_soon_threadsafe(function)
+
+    def __enter__(self) -> SessionThread:
+        self._thread.start()
+        assert self.streaming.wait(30), "the session did not start streaming"
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        self.loop.call_soon_threadsafe(self._stop.set)
+        self._thread.join(30)
+        self.session.sink.close()

@@ -131,7 +131,7 @@ class PolarStreamerNode(ManagedNode):
             for task in tasks:
                 task.cancel()
         final = self._publish_status(log=status != 2)
-        if final is not None:  # one machine-readable line: what was pushed, gaps, stalls, ...
+        if final is not None and status != 2:  # one machine-readable line: pushed, gaps, stalls, ...
             self.log.info(f"final status: {json.dumps(final, sort_keys=True)}")
         if status == 2:
             return fail(PROG, session.error or "stopped")

@@ -33,7 +33,7 @@ import contextlib
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from hri_physio_bridge.polar import control_point as cp
 from hri_physio_bridge.polar.ble import (
@@ -48,8 +48,12 @@ from hri_physio_bridge.polar.gatt import BATTERY_LEVEL, HEART_RATE_MEASUREMENT, 
 from hri_physio_bridge.polar.protocol import PolarProtocolError, decode_heart_rate
 from hri_physio_bridge.polar.virtual_time import FakeClock
 
+if TYPE_CHECKING:
+    from hri_physio_bridge.polar.session import PolarSession
+
 __all__ = [
     "FakeBleClient", "FakeClock", "FakePolarDevice", "FakeScanner", "Notification", "fake_client_factory",
+    "play_through",
 ]
 
 #: The source name of Heart Rate Measurement notifications in ``stall_after`` (PMD sources are
@@ -527,3 +531,18 @@ def fake_client_factory(advert: Advertisement, on_disconnect: Callable[[], None]
     if not isinstance(device, FakePolarDevice):
         raise ConnectionLostError(f"{advert.address} is not a fake device")
     return device.client(on_disconnect)
+
+
+async def play_through(session: PolarSession, device: FakePolarDevice) -> int:
+    """Run ``session`` on ``device`` until its timeline is played (or the session ends); its exit status.
+
+    The device plays from the moment the session streams, as ``polar_streamer --replay`` does.
+    """
+    session.listeners.append(lambda e: device.release() if e.get("state") == "streaming" else None)
+    stop = asyncio.Event()
+    task = asyncio.ensure_future(session.run(stop))
+    finished = asyncio.ensure_future(device.wait_finished())
+    await asyncio.wait({task, finished}, return_when=asyncio.FIRST_COMPLETED)
+    finished.cancel()
+    stop.set()
+    return await task

@@ -2,16 +2,15 @@
 
 from __future__ import annotations
 
-import asyncio
 import itertools
 import json
-import threading
 import uuid
 
 import pylsl
 import pytest
 
 from helpers import wait_until
+from helpers.polar import SessionThread
 from hri_physio_bridge.polar import control_point as cp
 from hri_physio_bridge.polar.config import PolarConfig
 from hri_physio_bridge.polar.encode import encode_compressed_frame, encode_ecg_frame, encode_heart_rate
@@ -62,17 +61,7 @@ def test_lsl_streams_names_rates_and_every_sample_in_order() -> None:
         sink,
         clock=pylsl.local_clock,
     )
-    loop = asyncio.new_event_loop()
-    stop = asyncio.Event()
-    streaming = threading.Event()
-    session.listeners.append(lambda e: streaming.set() if e.get("state") == "streaming" else None)
-    result: list[int] = []
-    runner = threading.Thread(
-        target=lambda: result.append(loop.run_until_complete(session.run(stop))), daemon=True
-    )
-    runner.start()
-    try:
-        assert streaming.wait(30), "the session did not start streaming"
+    with SessionThread(session) as runner:
         inlets = {}
         for kind in ("ECG", "HR", "RR", "Markers"):
             found = pylsl.resolve_byprop("name", f"PolarH10/{device_id}/{kind}", timeout=15)
@@ -90,7 +79,7 @@ def test_lsl_streams_names_rates_and_every_sample_in_order() -> None:
         assert info["Markers"].channel_format() == pylsl.cf_string
         assert info["ECG"].desc().child("channels").child("channel").child_value("unit") == "microvolts"
         assert info["ECG"].source_id() == f"{device_id}-ECG"
-        loop.call_soon_threadsafe(device.release)
+        runner.call(device.release)
         received: dict[str, list[tuple[float, list]]] = {k: [] for k in inlets}
 
         def pull_all(timeout: float) -> None:
@@ -102,11 +91,7 @@ def test_lsl_streams_names_rates_and_every_sample_in_order() -> None:
         while len(received["ECG"]) < len(sent) and pylsl.local_clock() < deadline:
             pull_all(0.2)
         pull_all(0.5)
-    finally:
-        loop.call_soon_threadsafe(stop.set)
-        runner.join(30)
-        sink.close()
-    assert result == [0]
+    assert runner.result == [0]
     ecg_values = [int(row[0]) for _, row in received["ECG"]]
     assert ecg_values == sent  # nothing dropped, duplicated or reordered; only the lost frame is missing
     stamps = [t for t, _ in received["ECG"]]
@@ -141,23 +126,13 @@ def test_a_corrected_rate_is_declared_anew_and_its_consumer_gets_every_sample() 
     session = PolarSession(PolarConfig(device=device_id, streams=["ppg"]), FakeScanner([device]),
                            fake_client_factory, sink, clock=pylsl.local_clock)
     session.data.reopen_wait_s = 300.0  # this test's consumer may be slow to find the new outlet
-    loop = asyncio.new_event_loop()
-    stop = asyncio.Event()
-    streaming = threading.Event()
-    session.listeners.append(lambda e: streaming.set() if e.get("state") == "streaming" else None)
-    result: list[int] = []
-    runner = threading.Thread(
-        target=lambda: result.append(loop.run_until_complete(session.run(stop))), daemon=True
-    )
-    runner.start()
     name = f"PolarOH1/{device_id}/PPG"
-    try:
-        assert streaming.wait(30), "the session did not start streaming"
+    with SessionThread(session) as runner:
         [first] = pylsl.resolve_byprop("name", name, timeout=15)
         assert first.nominal_srate() == 135.0  # what the device announced
         old = pylsl.StreamInlet(first)
         old.open_stream(timeout=10)
-        loop.call_soon_threadsafe(device.release)
+        runner.call(device.release)
         found: list = []
         wait_until(lambda: bool(found.extend(s for s in pylsl.resolve_byprop("name", name, timeout=0.5)
                                              if s.nominal_srate() == 55.0) or found),
@@ -169,11 +144,7 @@ def test_a_corrected_rate_is_declared_anew_and_its_consumer_gets_every_sample() 
         while len(received) < len(sent) and pylsl.local_clock() < deadline:
             samples, _ = inlet.pull_chunk(timeout=0.2, max_samples=4096)
             received += [row[0] for row in samples]
-    finally:
-        loop.call_soon_threadsafe(stop.set)
-        runner.join(30)
-        sink.close()
-    assert result == [0]
+    assert runner.result == [0]
     assert received == sent  # held through the re-declaration, then every sample in order
     stats = session.status()["streams"]["ppg"]
     assert (stats["rate_corrections"], stats["rate_hz"], stats["gaps"]) == (1, 55, 0)

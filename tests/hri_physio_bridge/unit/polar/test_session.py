@@ -27,6 +27,7 @@ from hri_physio_bridge.polar.fake import (
     FakeScanner,
     Notification,
     fake_client_factory,
+    play_through,
 )
 from hri_physio_bridge.polar.gatt import HEART_RATE_MEASUREMENT, PMD_CONTROL_POINT, PMD_DATA
 from hri_physio_bridge.polar.output import MemorySink
@@ -272,12 +273,7 @@ def test_capture_then_replay_gives_the_same_samples(tmp_path: Path) -> None:
             capture=capture,
             rng=random.Random(1),
         )
-        session.listeners.append(lambda e: device.release() if e.get("state") == "streaming" else None)
-        stop = asyncio.Event()
-        task = asyncio.ensure_future(session.run(stop))
-        await device.wait_finished()
-        stop.set()
-        await task
+        await play_through(session, device)
         return session
 
     recorded = run_virtual(record(), clock)
