@@ -69,6 +69,7 @@ from hri_physio_bringup.isolation import (
 from hri_physio_bringup.options import PROG, SessionConfig
 from hri_physio_bringup.plan import (
     COACH,
+    POLAR_STREAMER,
     SessionPlan,
     coach_config,
     plan_session,
@@ -88,7 +89,8 @@ class ClockAndWatcher(BackgroundNode):
     """Publishes /clock and watches the session's topics, on its own executor thread."""
 
     def __init__(self, view: SessionView, hr_topic: str, receivers: list[str],
-                 listeners: tuple[tuple[str, str], ...], guard: ClockGuard | None = None) -> None:
+                 listeners: tuple[tuple[str, str], ...], guard: ClockGuard | None = None,
+                 strap_node: str | None = None) -> None:
         from rosgraph_msgs.msg import Clock
         from std_msgs.msg import Float64MultiArray, String
 
@@ -165,6 +167,9 @@ class ClockAndWatcher(BackgroundNode):
         self.node.create_subscription(String, topics.QT_MOCK_EVENTS, on_json(count_action), event_qos())
         for node in receivers:
             self.node.create_subscription(String, f"/{node}/status", on_json(receiver_status(node)), 10)
+        if strap_node is not None:
+            self.node.create_subscription(String, f"/{strap_node}/status",
+                                          on_json(lambda data: setattr(view, "strap_status", data)), 10)
         if guard is not None:
             self._watch_the_loop(guard)
         self.start()
@@ -309,7 +314,8 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
     receivers = [n.name for n in plan.nodes if n.script == "physio_receiver"]
     # A simulated participant's loop can be held to the clock; a real strap lives in real time.
     guard = None if options.polar else ClockGuard(hr_wait=plan.coach.hr_wait)
-    watcher = ClockAndWatcher(view, plan.hr_topic, receivers, plan.listeners, guard)
+    strap = next((n.name for n in plan.nodes if n.script == POLAR_STREAMER), None)
+    watcher = ClockAndWatcher(view, plan.hr_topic, receivers, plan.listeners, guard, strap)
     # The clock runs at --speed from the beginning: before 'start' the participant sits and the
     # processor fills its first window (60 s of ECG) without keeping the launcher waiting.
     clock = SimClock(start=float(int(time.time())), speed=options.speed)

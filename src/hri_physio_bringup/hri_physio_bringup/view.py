@@ -67,6 +67,8 @@ class SessionView:
     conflict: str | None = None  # the coach found another session on its topics (its reason)
     #: The last status of each receiver (``/<node>/status``): samples received, published, gaps.
     receivers: dict[str, dict] = field(default_factory=dict)
+    #: The last status of polar_streamer (a real or replayed strap): samples, gaps, stalls, reconnects.
+    strap_status: dict = field(default_factory=dict)
     #: Where malformed-event lines go (rate-limited), and the clock of the rate limit.
     warn: Callable[[str], None] = field(default=_stderr, repr=False, compare=False)
     monotonic: Callable[[], float] = field(default=time.monotonic, repr=False, compare=False)
@@ -184,6 +186,7 @@ def summary(view: SessionView, wall: float, bag: str | None, now: float | None =
         f"[session] heart-rate samples on the coach's input during the session: {view.hr_samples}"
         + (f"; recorded to {bag}" if bag else ""),
         *(f"[session] {node}: {receiver_text(status)}" for node, status in sorted(view.receivers.items())),
+        *([f"[session] polar_streamer: {strap_text(view.strap_status)}"] if view.strap_status else []),
     ])
 
 
@@ -194,6 +197,12 @@ def receiver_text(status: dict) -> str:
     lost = [f"{status[k]} {k.replace('_', ' ')}" for k in ("gaps", "missing_samples", "rejected_chunks")
             if status.get(k)]
     return text + (f" ({', '.join(lost)})" if lost else ", nothing lost")
+
+
+def strap_text(status: dict) -> str:
+    """polar_streamer's last status in words: reconnects and the watchdog's stalls."""
+    return (f"{status.get('stalls', 0)} stall(s) of a stream ({status.get('stall_reconnects', 0)} ended in a "
+            f"reconnection), {status.get('reconnects', 0)} reconnection(s) in all")
 
 
 def overdue(view: SessionView, now: float, duration: float, margin: float) -> bool:
@@ -218,4 +227,5 @@ def session_counts(view: SessionView) -> dict[str, Any]:
         "hr_samples": view.hr_samples, "exercise_hr_samples": view.exercise_hr,
         "exercise_hr_in_zone": view.exercise_in_zone, "events": dict(view.events),
         "receivers": {node: dict(status) for node, status in view.receivers.items()},
+        "polar_streamer": dict(view.strap_status) if view.strap_status else None,
     }

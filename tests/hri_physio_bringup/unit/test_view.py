@@ -12,6 +12,7 @@ from hri_physio_bringup.view import (
     NOT_JSON,
     NOT_OBJECT,
     SessionView,
+    session_counts,
     summary,
 )
 from hri_physio_coach import gates
@@ -107,3 +108,14 @@ def test_summary_of_a_session_stopped_before_its_end() -> None:
     view.on_event({"t": 10.0, "event": "session_start"})
     text = summary(view, wall=255.0, bag=None, now=250.0)
     assert "[session] stopped before its end: 4.0 min of session in 255 s wall (1x)" in text
+
+
+def test_the_straps_stalls_are_in_the_summary_and_its_counts() -> None:
+    view = SessionView()
+    assert session_counts(view)["polar_streamer"] is None and "polar_streamer" not in summary(view, 1.0, None)
+    view.strap_status = {"state": "streaming", "stalls": 3, "stall_reconnects": 1, "reconnects": 2,
+                         "streams": {"ecg": {"samples": 1000, "stalls": 3}}}
+    assert session_counts(view)["polar_streamer"]["stalls"] == 3
+    assert session_counts(view)["polar_streamer"]["streams"]["ecg"]["stalls"] == 3
+    assert ("[session] polar_streamer: 3 stall(s) of a stream (1 ended in a reconnection), 2 reconnection(s) "
+            "in all") in summary(view, 1.0, None)

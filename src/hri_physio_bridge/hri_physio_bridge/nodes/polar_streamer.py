@@ -11,6 +11,7 @@ Examples::
     polar_streamer --device A1B2C3D4 --streams ecg,acc,hr --acc-rate 200 --acc-range 4
     polar_streamer --device A1B2C3D4 --capture session1.jsonl   # also record every notification
     polar_streamer --replay session1.jsonl                   # replay a capture as if the strap were there
+    polar_streamer --device "Polar Sense" --sdk-mode --streams ppg --ppg-rate 176  # Verity Sense, SDK mode
 """
 
 from __future__ import annotations
@@ -53,10 +54,14 @@ class PolarStreamerNode(ManagedNode):
         self.log = logic_logger(self.get_name(), self.get_logger())
         self.status_pub = self.create_publisher(String, "~/status", 10)
         self.replay_device: FakePolarDevice | None = None
+        self.session_config = cfg
         if cfg.replay:
             self.replay_device = FakePolarDevice.from_capture(
                 read_capture(cfg.replay), speed=cfg.replay_speed
             )
+            if not cfg.streams:  # what the capture holds, not what the sensor could send
+                recorded = self.replay_device.recorded_streams()
+                self.session_config = cfg.model_copy(update={"streams": recorded or cfg.streams})
         self.capture = (
             CaptureWriter(cfg.capture, {"program": PROG, "started": time.time()}) if cfg.capture else None
         )
@@ -88,18 +93,20 @@ class PolarStreamerNode(ManagedNode):
 
     async def _stream(self, stop_thread: threading.Event) -> int:
         scanner, factory = self._ble()
+        device = self.replay_device
         session = PolarSession(
-            self.config,
+            self.session_config,
             scanner,
             factory,
             self.sink,
             clock=pylsl.local_clock,
             log=self.log,
             capture=self.capture,
+            # A replay plays the capture's silences as they were recorded: nothing to restart.
+            watchdog=device is None,
         )
         self.session = session
         stop = asyncio.Event()
-        device = self.replay_device
         if device is not None:
             session.listeners.append(
                 lambda ev: (
@@ -123,7 +130,9 @@ class PolarStreamerNode(ManagedNode):
         finally:
             for task in tasks:
                 task.cancel()
-        self._publish_status(log=status != 2)
+        final = self._publish_status(log=status != 2)
+        if final is not None and status != 2:  # one machine-readable line: pushed, gaps, stalls, ...
+            self.log.info(f"final status: {json.dumps(final, sort_keys=True)}")
         if status == 2:
             return fail(PROG, session.error or "stopped")
         return status
@@ -137,12 +146,13 @@ class PolarStreamerNode(ManagedNode):
         self.status_pub.publish(String(data=json.dumps(status)))
         if log:
             streams = ", ".join(
-                f"{k} {s['samples']} samples ({s['gaps']} gaps, {s['dropped_frames']} dropped)"
+                f"{k} {s['samples']} samples ({s['gaps']} gaps, {s['dropped_frames']} dropped, "
+                f"{s['stalls']} stalls)"
                 for k, s in status["streams"].items()
             )
             self.log.info(
                 f"{status['state']}: {streams or 'no stream yet'}; reconnects {status['reconnects']}, "
-                f"drift {status['drift_ppm']:+.1f} ppm"
+                f"drift {status['drift_ppm']:+.1f} ppm, MTU {status['mtu'] or 'unknown'}"
             )
         return status
 

@@ -158,6 +158,19 @@ class BleakBleClient:
     def is_connected(self) -> bool:
         return bool(self._client.is_connected)
 
+    async def request_mtu(self, wanted: int) -> int | None:
+        """The link's MTU. bleak offers no request: its Android backend asks for 517 at connection,
+        Windows and macOS negotiate their largest, BlueZ exchanges its configured ExchangeMTU. BlueZ
+        reports 23 until the MTU is acquired (bleak's documented workaround: ``_acquire_mtu``)."""
+        backend = getattr(self._client, "_backend", None)
+        acquire = getattr(backend, "_acquire_mtu", None)
+        if acquire is not None:
+            await _call(acquire())
+        try:
+            return int(self._client.mtu_size)
+        except (BleakError, AttributeError, NotImplementedError):
+            return None
+
     async def read_gatt_char(self, uuid: str) -> bytes:
         return bytes(await _call(self._client.read_gatt_char(uuid)))
 

@@ -44,6 +44,26 @@ class PolarConfig(NodeConfig):
         "135 real; Verity Sense: 55, SDK mode 28, 44, 135, 176)",
         unit="Hz",
     )
+    sdk_mode: bool = option(
+        False,
+        "switch the sensor into Polar's SDK mode for its wider rates and ranges (Verity Sense; an H10 "
+        "and an OH1 have none); the sensor then computes no HR, RR or PPI",
+        switch=True,
+    )
+    start_timeout: float = option(
+        0.0,
+        "the watchdog's wait for a stream's first data after its start; 0 = per stream: 40 s for ECG "
+        "(an H10 may start it 20-30 s late) and PPI (first batch after ~25 s), 10 s otherwise",
+        unit="s",
+        ge=0,
+    )
+    stall_timeout: float = option(
+        5.0,
+        "longest silence of a streaming stream before the watchdog marks a stall and restarts it "
+        "(reconnecting if it stays silent); PPI, sent in batches, at least 30 s",
+        unit="s",
+        gt=0,
+    )
     scan_timeout: float = option(10.0, "length of one scan for the device", unit="s", gt=0)
     connect_timeout: float = option(20.0, "how long one connection attempt may take", unit="s", gt=0)
     response_timeout: float = option(
@@ -71,7 +91,10 @@ class PolarConfig(NodeConfig):
         "", "write every notification (characteristic, host time, bytes) to this JSON lines file"
     )
     replay: str = option("", "replay a capture file instead of a real device (tests, demos)")
-    replay_speed: float = option(1.0, "replay speed (1 = as recorded)", gt=0, le=100)
+    replay_speed: float = option(
+        1.0, "replay speed (1 = as recorded); a replay pushes every notification it holds at any speed",
+        gt=0, le=1000,
+    )
     status_period: float = option(5.0, "time between status reports (log and ~/status)", unit="s", gt=0)
 
     @field_validator("streams")
@@ -114,4 +137,10 @@ class PolarConfig(NodeConfig):
             )
         if self.replay and self.capture:
             raise ValueError("capture and replay cannot be used together")
+        computed = [s for s in self.streams if STREAM_KINDS[s].computed]
+        if self.sdk_mode and computed:
+            raise ValueError(
+                f"sdk_mode: a sensor in SDK mode computes no {', '.join(computed)}; "
+                "choose among ecg, acc, ppg (or leave SDK mode off)"
+            )
         return self

@@ -5,6 +5,13 @@ answers each with an indication ``F0 op measurement status more params``. Settin
 ``[setting type][count][count values]`` with a fixed width per type. Reading the control point
 gives the features (``0F`` then a bit mask of the measurements the device offers). A
 device-initiated indication ``01 <measurement...>`` says the device stopped those streams.
+SDK mode (Verity Sense: wider rates and ranges, no HR or PPI) is the pseudo-measurement 9,
+started and stopped like a stream (``02 09`` / ``03 09``); feature bit 1 of the second mask byte
+says a device has it.
+
+Real devices do not always name the request an error answers: an H10 at the default MTU answers
+``F0 00 01 0A`` (op 0, measurement 1, INVALID_MTU). :func:`answers` matches such an error to the
+pending request for the same measurement type.
 Pure Python; written from Polar's "Polar Measurement Data" documentation.
 """
 
@@ -26,6 +33,15 @@ class OpCode(IntEnum):
     GET_SETTINGS = 1
     START = 2
     STOP = 3
+    GET_SDK_MODE_SETTINGS = 4
+    GET_MEASUREMENT_STATUS = 5
+    GET_SDK_MODE_STATUS = 6
+
+
+#: The pseudo-measurement that switches SDK mode on (start) and off (stop).
+SDK_MODE = 9
+#: Bits of the measurement byte that name the measurement (bit 7 marks offline recording).
+MEASUREMENT_MASK = 0x3F
 
 
 class SettingType(IntEnum):
@@ -85,7 +101,7 @@ STATUS_TEXT: dict[int, str] = {
     Status.DISK_FULL: "the device's memory is full",
 }
 
-#: Feature bits of the first byte after 0F (the Verity Sense sets more in the next byte).
+#: Feature bits of the measurements the streamer knows: bit i of the first mask byte after 0F.
 _FEATURE_BITS = {
     0: Measurement.ECG,
     1: Measurement.PPG,
@@ -94,6 +110,8 @@ _FEATURE_BITS = {
     5: Measurement.GYRO,
     6: Measurement.MAGNETOMETER,
 }
+#: SDK mode: bit 1 of the second mask byte.
+_SDK_MODE_BIT = 8 + 1
 
 
 def status_text(status: int) -> str:
@@ -105,9 +123,12 @@ class ControlPointRefused(RuntimeError):
 
     def __init__(self, op: int, measurement: int, status: int) -> None:
         self.op, self.measurement, self.status = op, measurement, status
-        super().__init__(
-            f"{_op_name(op)} {_measurement_name(measurement)}: {status_text(status)} (status {status})"
-        )
+        super().__init__(f"{request_name(op, measurement)}: {status_text(status)} (status {status})")
+
+
+def request_name(op: int, measurement: int) -> str:
+    """``start ECG``, ``get settings of PPG``, ``stop SDK mode``..."""
+    return f"{_op_name(op)} {_measurement_name(measurement)}"
 
 
 def _op_name(op: int) -> str:
@@ -117,8 +138,10 @@ def _op_name(op: int) -> str:
 
 
 def _measurement_name(measurement: int) -> str:
+    if measurement & MEASUREMENT_MASK == SDK_MODE:
+        return "SDK mode"
     try:
-        return Measurement(measurement).name
+        return Measurement(measurement & MEASUREMENT_MASK).name
     except ValueError:
         return f"measurement {measurement}"
 
@@ -136,6 +159,11 @@ def start_request(measurement: int, settings: Mapping[SettingType, int] | None =
 
 def stop_request(measurement: int) -> bytes:
     return bytes([OpCode.STOP, measurement])
+
+
+def sdk_mode_request(enable: bool) -> bytes:
+    """``02 09`` switches SDK mode on, ``03 09`` off (the device answers NOT_SUPPORTED without it)."""
+    return bytes([OpCode.START if enable else OpCode.STOP, SDK_MODE])
 
 
 def encode_settings(settings: Mapping[SettingType, int]) -> bytes:
@@ -196,10 +224,28 @@ def decode_control_point(data: bytes) -> ControlPointResponse | StopIndication:
     return ControlPointResponse(op=data[1], measurement=data[2], status=status, more=more, params=params)
 
 
+def answers(response: ControlPointResponse, op: int, measurement: int) -> bool:
+    """Whether ``response`` answers the request ``op`` for ``measurement``.
+
+    The same op and measurement type; or an error status for the same measurement type under
+    another op (devices answer some errors with op 0: ``F0 00 01 0A``).
+    """
+    same_measurement = (response.measurement & MEASUREMENT_MASK) == (measurement & MEASUREMENT_MASK)
+    if not same_measurement:
+        return False
+    return response.op == op or response.status != Status.SUCCESS
+
+
 def decode_settings(params: bytes) -> dict[SettingType, list[int | float]]:
-    """The settings in a get-settings or start response: every offered value per setting type."""
+    """The settings in a get-settings or start response: every offered value per setting type.
+
+    One byte or less is no settings: an H10 answers a start with ``F0 02 00 00 00 00``, whose
+    single parameter byte carries nothing (Polar's SDK reads it the same way).
+    """
     params = bytes(params)
     out: dict[SettingType, list[int | float]] = {}
+    if len(params) <= 1:
+        return out
     offset = 0
     while offset < len(params):
         if offset + 2 > len(params):
@@ -235,13 +281,19 @@ def decode_features(data: bytes) -> set[Measurement]:
     return {measurement for bit, measurement in _FEATURE_BITS.items() if data[1] & (1 << bit)}
 
 
-def encode_features(measurements: set[int]) -> bytes:
+def has_sdk_mode(data: bytes) -> bool:
+    """Whether a feature read (``0F <mask> <mask> ...``) offers SDK mode."""
+    data = bytes(data)
+    return len(data) > 2 and data[0] == FEATURES_CODE and bool(data[2] & (1 << (_SDK_MODE_BIT - 8)))
+
+
+def encode_features(measurements: set[int], sdk_mode: bool = False) -> bytes:
     """The feature read a device with ``measurements`` answers (used by the fake device)."""
     mask = 0
     for bit, measurement in _FEATURE_BITS.items():
         if measurement in measurements:
             mask |= 1 << bit
-    return bytes([FEATURES_CODE, mask, 0])
+    return bytes([FEATURES_CODE, mask, (1 << (_SDK_MODE_BIT - 8)) if sdk_mode else 0])
 
 
 def encode_response(

@@ -25,6 +25,8 @@ ECG_RATES = (130,)
 ACC_RATES = (25, 26, 50, 52, 100, 104, 200, 208, 416)
 ACC_RANGES = (2, 4, 8, 16)
 PPG_RATES = (28, 44, 55, 130, 135, 176)
+#: The rates Polar sensors sample at, per stream: a measured effective rate near one is given as it.
+KNOWN_RATES: dict[str, tuple[int, ...]] = {"ecg": ECG_RATES, "acc": ACC_RATES, "ppg": PPG_RATES}
 
 
 @dataclass(frozen=True)
@@ -38,14 +40,27 @@ class StreamKind:
     units: tuple[str, ...]
     #: Fixed nominal rate (Hz); None = the rate the device was started at; 0 = irregular.
     nominal_rate: float | None
+    #: Computed by the sensor's own algorithms (HR, RR, PPI): not available in SDK mode.
+    computed: bool = False
+    #: How long the first data may take after a start (the watchdog's default start timeout).
+    first_data_s: float = 10.0
+    #: The shortest silence the watchdog may call a stall (data that comes in batches).
+    min_stall_s: float = 0.0
+
+    @property
+    def source(self) -> str:
+        """What the watchdog watches: the measurement, or ``hr`` (one notification feeds HR and RR)."""
+        return self.key if self.measurement is not None else "hr"
 
 
 STREAM_KINDS: dict[str, StreamKind] = {
-    "ecg": StreamKind("ecg", "ECG", Measurement.ECG, ("ECG",), ("microvolts",), None),
+    # An H10's ECG may start 20-30 s after its start was accepted (owners' reports).
+    "ecg": StreamKind("ecg", "ECG", Measurement.ECG, ("ECG",), ("microvolts",), None, first_data_s=40.0),
     "acc": StreamKind("acc", "ACC", Measurement.ACC, ("X", "Y", "Z"), ("mG", "mG", "mG"), None),
     "ppg": StreamKind(
         "ppg", "PPG", Measurement.PPG, ("PPG0", "PPG1", "PPG2", "Ambient"), ("a.u.",) * 4, None
     ),
+    # PPI: the first batch about 25 s after the start, then batches of a few beats (Polar's documentation).
     "ppi": StreamKind(
         "ppi",
         "PPI",
@@ -53,9 +68,12 @@ STREAM_KINDS: dict[str, StreamKind] = {
         ("PPI", "PPIError", "HR", "Flags"),
         ("ms", "ms", "bpm", "bits: 0 invalid, 1 skin contact, 2 contact supported"),
         0.0,
+        computed=True,
+        first_data_s=40.0,
+        min_stall_s=30.0,
     ),
-    "hr": StreamKind("hr", "HR", None, ("HR",), ("bpm",), 1.0),
-    "rr": StreamKind("rr", "RR", None, ("RR",), ("ms",), 0.0),
+    "hr": StreamKind("hr", "HR", None, ("HR",), ("bpm",), 1.0, computed=True),
+    "rr": StreamKind("rr", "RR", None, ("RR",), ("ms",), 0.0, computed=True),
 }
 
 
@@ -144,5 +162,7 @@ def help_values() -> str:
         "Valid values per device (Polar BLE SDK): H10: ECG 130 Hz; ACC 25, 50, 100, 200 Hz at 2, 4, 8 G. "
         "OH1: PPG 130 Hz as reported (135 Hz real); ACC 50 Hz at 8 G. Verity Sense: PPG 55 Hz "
         "(28, 44, 135, 176 Hz in SDK mode); ACC 52 Hz at 8 G (26-416 Hz, 2-16 G in SDK mode). "
-        "The device's own settings are checked at connect time."
+        "SDK mode (--sdk-mode) is a Verity Sense's; it switches HR, RR and PPI off. "
+        "The device's own settings are checked at connect time, and each stream's rate is measured "
+        "on its first frames (a rate announced wrongly is corrected, with a rate_corrected marker)."
     )

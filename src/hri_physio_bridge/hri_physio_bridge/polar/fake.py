@@ -1,27 +1,39 @@
 """A faithful fake of a Polar sensor at the BLE boundary: scripted answers, byte-exact notifications.
 
 :class:`FakePolarDevice` answers what a real sensor answers on the calls the streamer makes
-(connect, disconnect, is_connected, read/write a characteristic, start/stop notifications, the
-disconnected callback): the feature read, the battery level, control point requests answered
-with indications (settings, start/stop status, scripted refusals), and a timeline of recorded
-notifications (PMD data, Heart Rate Measurement, device-initiated stops) replayed byte for byte.
-A capture file becomes such a timeline (:meth:`FakePolarDevice.from_capture`).
+(connect, disconnect, is_connected, the link's MTU, read/write a characteristic, start/stop
+notifications, the disconnected callback): the feature read, the battery level, control point
+requests answered with indications (settings, start/stop status, SDK mode, scripted refusals),
+and a timeline of recorded notifications (PMD data, Heart Rate Measurement, device-initiated
+stops) replayed byte for byte. A capture file becomes such a timeline
+(:meth:`FakePolarDevice.from_capture`).
 
 Timeline times are seconds on the device's own axis. Playback starts when the session says it
-is streaming (:meth:`FakePolarDevice.release`), aligned so the first notification is due at
-once; notifications that fall due while the link is down are lost, as with a real sensor.
-Faults: failed connects, pairing required, dropping the link after N data notifications,
-stopping a stream by itself. With a :class:`FakeClock` everything runs in virtual time
-(no real waiting); without one, in real time at ``speed``.
+is streaming (:meth:`FakePolarDevice.release`), the first notification due at once; every
+notification of the timeline is delivered on time, except those that fall due while the link is
+down or while the device does not send that data (as with a real sensor), which are counted in
+:attr:`FakePolarDevice.lost`.
+
+Faults seen on real sensors, each scriptable: failed connects, pairing required, dropping the
+link after N data notifications, stopping a stream by itself, a link MTU too small for its
+frames (INVALID_MTU) or INVALID_MTU now and then whatever the MTU, error answers that name no
+op (``F0 00 <measurement> <status>``), a stream that falls silent without any indication
+(``stall_after``) and heals on a restart, a reconnection or never, and a stream whose first data
+comes late after its start (``start_delays``).
+
+Time: inside :func:`~hri_physio_bridge.polar.virtual_time.run_virtual` with a
+:class:`FakeClock`, everything runs in virtual time (no real waiting); without a clock, in real
+time at ``speed``.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from hri_physio_bridge.polar import control_point as cp
 from hri_physio_bridge.polar.ble import (
@@ -31,27 +43,24 @@ from hri_physio_bridge.polar.ble import (
     PairingRequiredError,
 )
 from hri_physio_bridge.polar.capture import Capture
+from hri_physio_bridge.polar.devices import STREAM_KINDS
 from hri_physio_bridge.polar.gatt import BATTERY_LEVEL, HEART_RATE_MEASUREMENT, PMD_CONTROL_POINT, PMD_DATA
+from hri_physio_bridge.polar.protocol import PolarProtocolError, decode_heart_rate
+from hri_physio_bridge.polar.virtual_time import FakeClock
 
+if TYPE_CHECKING:
+    from hri_physio_bridge.polar.session import PolarSession
 
-class FakeClock:
-    """Virtual seconds: only :meth:`advance`/:meth:`set`/:meth:`sleep` move it."""
+__all__ = [
+    "FakeBleClient", "FakeClock", "FakePolarDevice", "FakeScanner", "Notification", "fake_client_factory",
+    "play_through",
+]
 
-    def __init__(self, start: float = 1000.0) -> None:
-        self.now = float(start)
-
-    def __call__(self) -> float:
-        return self.now
-
-    def advance(self, seconds: float) -> None:
-        self.now += max(0.0, seconds)
-
-    def set(self, t: float) -> None:
-        self.now = max(self.now, t)
-
-    async def sleep(self, seconds: float) -> None:
-        self.advance(seconds)
-        await asyncio.sleep(0)
+#: The source name of Heart Rate Measurement notifications in ``stall_after`` (PMD sources are
+#: measurement types).
+HR_SOURCE = "hr"
+#: What heals a stalled source: a restart of it, a new connection, or nothing.
+STALL_HEALS = ("restart", "reconnect", "never")
 
 
 @dataclass(frozen=True)
@@ -83,7 +92,26 @@ class FakePolarDevice:
         disconnect_after: Sequence[int] = (),
         stop_indication_after: int | None = None,
         visible: bool = True,
+        mtu: int | None = 247,
+        min_mtu: int = 232,
+        invalid_mtu_answers: int = 0,
+        unnamed_errors: bool = False,
+        stall_after: Mapping[int | str, int] | None = None,
+        stall_heals: str = "restart",
+        start_delays: Mapping[int, Sequence[float]] | None = None,
+        sdk_mode: bool = False,
+        sdk_settings: dict[int, bytes] | None = None,
     ) -> None:
+        """``mtu``: the largest ATT MTU the link negotiates (None: the stack cannot tell);
+        ``min_mtu``: below it the device answers INVALID_MTU (its frames do not fit);
+        ``invalid_mtu_answers``: that many settings/start requests answered INVALID_MTU anyway;
+        ``unnamed_errors``: error answers carry op 0; ``stall_after``: a source (measurement type
+        or ``"hr"``) falls silent after that many notifications on a connection (once), healed by
+        ``stall_heals``; ``start_delays``: per measurement, the delay of the first data after each
+        start, one per start (later starts: none); ``sdk_mode``: the device offers SDK mode, in
+        which get-settings answers ``sdk_settings``."""
+        if stall_heals not in STALL_HEALS:
+            raise ValueError(f"stall_heals must be one of {', '.join(STALL_HEALS)}, got {stall_heals!r}")
         self.name, self.address, self.rssi = name, address, rssi
         self.features = set(features)
         self.battery = battery
@@ -98,21 +126,35 @@ class FakePolarDevice:
         self.disconnect_after = list(disconnect_after)
         self.stop_indication_after = stop_indication_after
         self.visible = visible
+        self.mtu, self.min_mtu = mtu, min_mtu
+        self.invalid_mtu_answers = invalid_mtu_answers
+        self.unnamed_errors = unnamed_errors
+        self.stall_after = dict(stall_after or {})
+        self.stall_heals = stall_heals
+        self.start_delays = {m: list(delays) for m, delays in (start_delays or {}).items()}
+        self.sdk_mode_offered = sdk_mode
+        self.sdk_settings = dict(sdk_settings or {})
         # observable state
         self.operations: list[tuple[str, ...]] = []
         self.connected = False
         self.connections = 0
         self.active: set[int] = set()
         self.subscriptions: dict[str, NotifyCallback] = {}
+        self.sdk_mode = False
+        self.link_mtu: int | None = None
         self.delivered = 0
         self.lost = 0
+        self.stalls = 0
         self._on_disconnect: Callable[[], None] | None = None
-        self._released_at: float | None = None
-        self._base: float | None = None
+        self._base: float | None = None  # host time of timeline time 0
+        self._released_from = 0.0  # timeline time from which notifications are delivered
         self._release: asyncio.Event | None = None
         self._finished: asyncio.Event | None = None
         self._playback: asyncio.Task[None] | None = None
         self._data_this_connection = 0
+        self._sent: dict[int | str, int] = {}  # notifications sent per source on this connection
+        self._stalled: set[int | str] = set()
+        self._quiet_until: dict[int, float] = {}  # first data of a started measurement not before
         self._stop_sent = False
 
     # -- construction from a capture ---------------------------------------------------------------
@@ -127,6 +169,7 @@ class FakePolarDevice:
         for rec in capture.records:
             if rec.op == "read" and rec.char == PMD_CONTROL_POINT and not features:
                 features = cp.decode_features(rec.data)
+                kwargs.setdefault("sdk_mode", cp.has_sdk_mode(rec.data))
             elif rec.op == "read" and rec.char == BATTERY_LEVEL and battery is None and len(rec.data) == 1:
                 battery = rec.data[0]
             elif rec.op == "notify" and rec.char == PMD_CONTROL_POINT:
@@ -151,6 +194,22 @@ class FakePolarDevice:
             **kwargs,
         )
 
+    def recorded_streams(self) -> list[str]:
+        """The streams the timeline holds data for (``ecg``, ``acc``, ..., ``hr``, ``rr``)."""
+        pmd = [k for k in STREAM_KINDS.values() if k.measurement is not None]
+        by_measurement = {int(k.measurement): k.key for k in pmd if k.measurement is not None}
+        keys: set[str] = set()
+        for note in self.timeline:
+            source = self._source(note)
+            if isinstance(source, int) and source in by_measurement:
+                keys.add(by_measurement[source])
+            elif source == HR_SOURCE:
+                keys.add("hr")
+                with contextlib.suppress(PolarProtocolError):
+                    if decode_heart_rate(note.data).rr_1024:
+                        keys.add("rr")
+        return [key for key in STREAM_KINDS if key in keys]
+
     @property
     def advertisement(self) -> Advertisement:
         return Advertisement(self.name, self.address, self.rssi, handle=self)
@@ -160,12 +219,21 @@ class FakePolarDevice:
 
     # -- playback ----------------------------------------------------------------------------------
     def release(self) -> None:
-        """Let the timeline play on the current connection (call when the session streams)."""
+        """Let the timeline play on the current connection (call when the session streams).
+
+        The first release puts the timeline's first notification at this instant (exactly: it
+        is never late). A later one (after a reconnection) resumes where the timeline is by
+        now; what fell due in between was lost with the link.
+        """
         if not self.connected:
             return
-        self._released_at = self._now()
+        now = self._now()
         if self._base is None:
-            self._base = self._released_at - (self.timeline[0].t / self.speed if self.timeline else 0.0)
+            first = self.timeline[0].t if self.timeline else 0.0
+            self._base = now - first / self.speed
+            self._released_from = first
+        else:
+            self._released_from = (now - self._base) * self.speed
         self._events()[0].set()
         if self._playback is None:
             self._playback = asyncio.ensure_future(self._play())
@@ -187,27 +255,50 @@ class FakePolarDevice:
         try:
             for note in self.timeline:
                 await release.wait()
-                assert self._base is not None and self._released_at is not None
-                due = self._base + note.t / self.speed
-                if self.clock is not None:
-                    self.clock.set(due)
-                    await asyncio.sleep(0)
-                else:
-                    await asyncio.sleep(max(0.0, due - time.monotonic()))
-                if not self.connected or due < self._released_at:
+                assert self._base is not None
+                wait = self._base + note.t / self.speed - self._now()
+                if wait > 0:
+                    await asyncio.sleep(wait)
+                # Compared on the timeline's own axis: the first notification is never "before" the release.
+                if not self.connected or note.t < self._released_from:
                     self.lost += 1
                     continue
                 self._deliver(note)
         finally:
             finished.set()
 
+    @staticmethod
+    def _source(note: Notification) -> int | str | None:
+        if note.char == PMD_DATA:
+            return note.data[0] & cp.MEASUREMENT_MASK if note.data else None
+        return HR_SOURCE if note.char == HEART_RATE_MEASUREMENT else None
+
+    def _sends(self, source: int | str | None) -> bool:
+        """Whether the device sends this source's notification now (started, not stalled, not late)."""
+        if source is None:
+            return True
+        if source in self._stalled:
+            return False
+        quiet_until = self._quiet_until.get(source, float("-inf")) if isinstance(source, int) else 0.0
+        if isinstance(source, int) and (source not in self.active or self._now() < quiet_until):
+            return False
+        limit = self.stall_after.get(source)
+        if limit is not None and self._sent.get(source, 0) >= limit:
+            del self.stall_after[source]
+            self._stalled.add(source)
+            self.stalls += 1
+            self.operations.append(("stalled", str(source)))
+            return False
+        return True
+
     def _deliver(self, note: Notification) -> None:
         callback = self.subscriptions.get(note.char)
-        if note.char == PMD_DATA and (not note.data or note.data[0] & 0x3F not in self.active):
-            callback = None
-        if callback is None:
+        source = self._source(note)
+        if callback is None or not self._sends(source):
             self.lost += 1
             return
+        if source is not None:
+            self._sent[source] = self._sent.get(source, 0) + 1
         self.delivered += 1
         callback(note.char, bytearray(note.data))
         if note.char != PMD_DATA:
@@ -240,6 +331,7 @@ class FakePolarDevice:
         self.connected = False
         self.active.clear()
         self.subscriptions.clear()
+        self.sdk_mode = False  # SDK mode ends when the sensor restarts its session; kept simple here
         if self._release is not None:
             self._release.clear()
 
@@ -262,6 +354,18 @@ class FakePolarDevice:
         self.connections += 1
         self._on_disconnect = on_disconnect
         self._data_this_connection = 0
+        self._sent.clear()
+        self._quiet_until.clear()
+        self.link_mtu = self.mtu
+        if self.stall_heals in ("restart", "reconnect"):
+            self._stalled.clear()
+
+    async def _request_mtu(self, wanted: int) -> int | None:
+        self._check()
+        self.operations.append(("request_mtu", str(wanted)))
+        await asyncio.sleep(0)
+        self.link_mtu = None if self.mtu is None else min(wanted, self.mtu)
+        return self.link_mtu
 
     async def _disconnect(self) -> None:
         self.operations.append(("disconnect",))
@@ -279,7 +383,7 @@ class FakePolarDevice:
         self.operations.append(("read", uuid))
         await asyncio.sleep(0)
         if uuid == PMD_CONTROL_POINT:
-            return cp.encode_features(self.features)
+            return cp.encode_features(self.features, sdk_mode=self.sdk_mode_offered)
         if uuid == BATTERY_LEVEL and self.battery is not None:
             return bytes([self.battery])
         raise ConnectionLostError(f"{self.name} has no readable characteristic {uuid}")
@@ -292,24 +396,65 @@ class FakePolarDevice:
             raise ConnectionLostError(f"write to {uuid} rejected")
         if self.pairing_required:
             raise PairingRequiredError(f"{self.name} requires pairing (scripted)")
-        op, m = data[0], data[1] & 0x3F
-        if m not in self.features:
-            self._indicate(cp.encode_response(op, m, cp.Status.NOT_SUPPORTED))
+        op, m = data[0], data[1] & cp.MEASUREMENT_MASK
+        if m == cp.SDK_MODE and op in (cp.OpCode.START, cp.OpCode.STOP):
+            self._answer_sdk_mode(op)
+        elif m not in self.features:
+            self._answer(op, m, cp.Status.NOT_SUPPORTED)
+        elif op in (cp.OpCode.GET_SETTINGS, cp.OpCode.START) and self._refuses_mtu():
+            self._answer(op, m, cp.Status.INVALID_MTU)
         elif op == cp.OpCode.GET_SETTINGS:
-            self._indicate(cp.encode_response(op, m, cp.Status.SUCCESS, self.settings.get(m, b"")))
+            offered = self.sdk_settings if self.sdk_mode else self.settings
+            self._answer(op, m, cp.Status.SUCCESS, offered.get(m, b""))
         elif op == cp.OpCode.START:
             status = self.start_status.get(m, cp.Status.SUCCESS)
             if status == cp.Status.SUCCESS and m in self.active:
                 status = cp.Status.ALREADY_IN_STATE
             if status in (cp.Status.SUCCESS, cp.Status.ALREADY_IN_STATE):
-                self.active.add(m)
-            self._indicate(cp.encode_response(op, m, status, self.start_params.get(m, b"")))
+                self._started(m)
+            self._answer(op, m, status, self.start_params.get(m, b""))
         elif op == cp.OpCode.STOP:
             status = cp.Status.SUCCESS if m in self.active else cp.Status.ALREADY_IN_STATE
             self.active.discard(m)
-            self._indicate(cp.encode_response(op, m, status))
+            self._answer(op, m, status)
         else:
-            self._indicate(cp.encode_response(op, m, cp.Status.INVALID_OP_CODE))
+            self._answer(op, m, cp.Status.INVALID_OP_CODE)
+
+    def _refuses_mtu(self) -> bool:
+        if self.link_mtu is not None and self.link_mtu < self.min_mtu:
+            return True
+        if self.invalid_mtu_answers > 0:
+            self.invalid_mtu_answers -= 1
+            return True
+        return False
+
+    def _started(self, m: int) -> None:
+        if m not in self.active:
+            delays = self.start_delays.get(m)
+            self._quiet_until[m] = self._now() + (delays.pop(0) if delays else 0.0)
+        self.active.add(m)
+        if self.stall_heals == "restart":
+            self._stalled.discard(m)
+        self._sent.pop(m, None)
+
+    def _answer_sdk_mode(self, op: int) -> None:
+        if not self.sdk_mode_offered:
+            self._answer(op, cp.SDK_MODE, cp.Status.NOT_SUPPORTED)
+            return
+        enable = op == cp.OpCode.START
+        status = cp.Status.ALREADY_IN_STATE if self.sdk_mode == enable else cp.Status.SUCCESS
+        if enable and self.active:
+            status = cp.Status.INVALID_STATE  # SDK mode cannot change while a stream runs
+        elif status == cp.Status.SUCCESS:
+            self.sdk_mode = enable
+        self._answer(op, cp.SDK_MODE, status)
+
+    def _answer(self, op: int, m: int, status: int, params: bytes = b"") -> None:
+        """A response indication; with ``unnamed_errors`` an error names no op (``F0 00 m status``)."""
+        if status != cp.Status.SUCCESS and status != cp.Status.ALREADY_IN_STATE and self.unnamed_errors:
+            self._indicate(bytes([cp.RESPONSE_CODE, 0, m, status]))
+            return
+        self._indicate(cp.encode_response(op, m, status, params))
 
 
 class FakeBleClient:
@@ -329,6 +474,9 @@ class FakeBleClient:
     def is_connected(self) -> bool:
         return self.device.connected
 
+    async def request_mtu(self, wanted: int) -> int | None:
+        return await self.device._request_mtu(wanted)
+
     async def read_gatt_char(self, uuid: str) -> bytes:
         return await self.device._read(uuid)
 
@@ -339,6 +487,9 @@ class FakeBleClient:
         self.device._check()
         self.device.operations.append(("start_notify", uuid))
         self.device.subscriptions[uuid] = callback
+        if uuid == HEART_RATE_MEASUREMENT and self.device.stall_heals == "restart":
+            self.device._stalled.discard(HR_SOURCE)
+            self.device._sent.pop(HR_SOURCE, None)
 
     async def stop_notify(self, uuid: str) -> None:
         self.device.operations.append(("stop_notify", uuid))
@@ -380,3 +531,18 @@ def fake_client_factory(advert: Advertisement, on_disconnect: Callable[[], None]
     if not isinstance(device, FakePolarDevice):
         raise ConnectionLostError(f"{advert.address} is not a fake device")
     return device.client(on_disconnect)
+
+
+async def play_through(session: PolarSession, device: FakePolarDevice) -> int:
+    """Run ``session`` on ``device`` until its timeline is played (or the session ends); its exit status.
+
+    The device plays from the moment the session streams, as ``polar_streamer --replay`` does.
+    """
+    session.listeners.append(lambda e: device.release() if e.get("state") == "streaming" else None)
+    stop = asyncio.Event()
+    task = asyncio.ensure_future(session.run(stop))
+    finished = asyncio.ensure_future(device.wait_finished())
+    await asyncio.wait({task, finished}, return_when=asyncio.FIRST_COMPLETED)
+    finished.cancel()
+    stop.set()
+    return await task

@@ -45,6 +45,13 @@ class LslSink:
         self._outlets[stream.key] = outlet
         self.streams[stream.key] = stream
 
+    def reopen(self, stream: OutputStream) -> None:
+        """A new outlet with the stream's corrected declaration (same name and source id)."""
+        old = self._outlets.pop(stream.key, None)
+        if old is not None:
+            old.close(linger=0.0)
+        self.open(stream)
+
     def push(self, key: str, stamps: list[float], rows: list[list[float]]) -> None:
         frame = Frame(np.asarray(stamps, dtype=np.float64), np.asarray(rows, dtype=np.float64),
                       self.streams[key].channels)

@@ -28,6 +28,10 @@ class OutputStream:
 class Sink(Protocol):
     def open(self, stream: OutputStream) -> None: ...
 
+    def reopen(self, stream: OutputStream) -> None:
+        """Declare an opened stream anew (its rate was corrected): the old declaration goes away."""
+        ...
+
     def push(self, key: str, stamps: list[float], rows: list[list[float]]) -> None: ...
 
     def marker(self, key: str, stamp: float, text: str) -> None: ...
@@ -44,11 +48,18 @@ class MemorySink:
         self.streams: dict[str, OutputStream] = {}
         self.samples: dict[str, list[tuple[float, list[float]]]] = {}
         self.markers: list[tuple[float, str]] = []
+        self.reopened: list[OutputStream] = []
         self.closed = False
 
     def open(self, stream: OutputStream) -> None:
         self.streams[stream.key] = stream
         self.samples.setdefault(stream.key, [])
+
+    def reopen(self, stream: OutputStream) -> None:
+        if stream.key not in self.streams:
+            raise KeyError(f"stream {stream.key} was not opened")
+        self.reopened.append(stream)
+        self.streams[stream.key] = stream
 
     def push(self, key: str, stamps: list[float], rows: list[list[float]]) -> None:
         if key not in self.streams:

@@ -1,18 +1,23 @@
-"""One Polar sensor's life cycle: find, connect, start its streams, time every sample, reconnect.
+"""One Polar sensor's life cycle: find, connect, start its streams, watch them, reconnect.
 
 :class:`PolarSession` runs on an asyncio loop and knows nothing of bleak, rclpy or pylsl: the
 BLE stack comes in as a :class:`~hri_physio_bridge.polar.ble.Scanner` and a client factory, the
 outputs as a :class:`~hri_physio_bridge.polar.output.Sink`, time as an injected clock (seconds on
 the LSL clock) and sleep.
 
-Life cycle, until stopped: scan for the device (id, address or name prefix), connect, read its
-features, subscribe to the control point and the data (and the Heart Rate Measurement), ask each
-requested measurement's settings, start it at the requested rate/range, then stream. When the
-link drops, the outputs stay open (consumers keep their inlets), the session backs off with
-jitter (1 -> 30 s), scans, reconnects, re-subscribes, restarts the streams and restarts all
-timing. Before any deliberate disconnect every started measurement is stopped (an H10 left
-streaming drains its battery). Problems a retry cannot fix end the run with a one-line message:
-no Bluetooth, pairing required, a stream or setting the device does not offer.
+Life cycle, until stopped: scan for the device (id, address or name prefix), connect, read the
+link's MTU, read its features, subscribe to the control point and the data (and the Heart Rate
+Measurement), switch SDK mode on if asked, ask each requested measurement's settings, start it at
+the requested rate/range, then stream (:mod:`~hri_physio_bridge.polar.data_path`) while a
+:class:`~hri_physio_bridge.polar.watchdog.StreamWatchdog` checks that every stream's data starts
+and keeps coming: a silent stream gets a ``stall`` marker, a warning and a restart, and a
+reconnection if it stays silent. When the link drops (or the watchdog asks), the outputs stay
+open (consumers keep their inlets), the session backs off with jitter (1 -> 30 s), scans,
+reconnects, re-subscribes, restarts the streams and restarts all timing. INVALID_MTU is retried
+the same way. Before any deliberate disconnect every started measurement is stopped (an H10 left
+streaming drains its battery) and SDK mode switched off. Problems a retry cannot fix end the run
+with a one-line message: no Bluetooth, pairing required, a stream, a setting or SDK mode the
+device does not offer.
 """
 
 from __future__ import annotations
@@ -24,7 +29,6 @@ import logging
 import random
 import time
 from collections.abc import Awaitable, Callable
-from dataclasses import asdict, dataclass, field
 from typing import Any, TypeVar
 
 from hri_physio_bridge.polar import control_point as cp
@@ -41,8 +45,9 @@ from hri_physio_bridge.polar.ble import (
     Sleep,
 )
 from hri_physio_bridge.polar.capture import CaptureWriter
-from hri_physio_bridge.polar.clock_sync import DeviceClockMapper
 from hri_physio_bridge.polar.config import PolarConfig
+from hri_physio_bridge.polar.control_channel import ControlPointChannel, UnsupportedError
+from hri_physio_bridge.polar.data_path import ActiveStream, DataPath, StreamStats
 from hri_physio_bridge.polar.devices import (
     FAMILIES,
     STREAM_KINDS,
@@ -56,39 +61,24 @@ from hri_physio_bridge.polar.devices import (
 )
 from hri_physio_bridge.polar.gatt import BATTERY_LEVEL, HEART_RATE_MEASUREMENT, PMD_CONTROL_POINT, PMD_DATA
 from hri_physio_bridge.polar.gatt import decode_battery as _decode_battery
+from hri_physio_bridge.polar.mtu import PREFERRED_MTU, short_mtu_warning
 from hri_physio_bridge.polar.output import OutputStream, Sink
-from hri_physio_bridge.polar.protocol import (
-    Measurement,
-    PmdFrame,
-    PolarProtocolError,
-    decode_heart_rate,
-    decode_pmd_frame,
-)
-from hri_physio_bridge.polar.timing import NS, BeatTimer, FrameTimer, TimingCounts
+from hri_physio_bridge.polar.protocol import Measurement, PolarProtocolError
+from hri_physio_bridge.polar.timing import NS, BeatTimer
+from hri_physio_bridge.polar.watchdog import RESTART, START, Alarm, StreamWatchdog
 from hri_physio_bridge.rate_limit import RateLimitedLog
 from hri_physio_bridge.waiting import Backoff
 
 T = TypeVar("T")
 
-#: Control point statuses that a retry will not fix (the request itself is wrong for this device).
-_UNSUPPORTED_STATUSES = {
-    cp.Status.INVALID_OP_CODE,
-    cp.Status.INVALID_MEASUREMENT_TYPE,
-    cp.Status.NOT_SUPPORTED,
-    cp.Status.INVALID_LENGTH,
-    cp.Status.INVALID_PARAMETER,
-    cp.Status.INVALID_RESOLUTION,
-    cp.Status.INVALID_SAMPLE_RATE,
-    cp.Status.INVALID_RANGE,
-    cp.Status.INVALID_MTU,
-    cp.Status.INVALID_NUMBER_OF_CHANNELS,
-}
+__all__ = ["FATAL_ERRORS", "PolarSession", "Stopped", "StreamStats", "UnsupportedError", "describe_adverts",
+           "scan_for_polar"]
+
 #: PPI arrives in batches (the first after ~25 s): its chain may lag the arrival this much.
 PPI_MAX_LAG_NS = 30 * NS
-
-
-class UnsupportedError(RuntimeError):
-    """The device does not offer a requested stream or setting (not retried)."""
+#: The watchdog looks at least this often (s), and logs a first data later than this after a start.
+WATCHDOG_TICK = 1.0
+LATE_FIRST_DATA_S = 5.0
 
 
 class Stopped(Exception):
@@ -97,42 +87,6 @@ class Stopped(Exception):
 
 #: Errors that end the run at once (exit status 2): retrying cannot fix them.
 FATAL_ERRORS = (BleUnavailableError, PairingRequiredError, UnsupportedError)
-
-
-@dataclass
-class ActiveStream:
-    """A started output stream of the current connection."""
-
-    kind: StreamKind
-    rate: float = 0.0
-    selected: dict[cp.SettingType, int] = field(default_factory=dict)
-    factor: float = 1.0
-    timer: FrameTimer | None = None
-    beats: BeatTimer | None = None
-
-    @property
-    def channels(self) -> int | None:
-        return self.selected.get(cp.SettingType.CHANNELS)
-
-    @property
-    def resolution(self) -> int | None:
-        return self.selected.get(cp.SettingType.RESOLUTION)
-
-
-@dataclass
-class StreamStats:
-    """One stream's counts for the whole session (every connection), as in ``status()["streams"]``."""
-
-    rate_hz: float = 0.0
-    samples: int = 0  # pushed to the sink
-    frames: int = 0  # notifications decoded (HR: with a value for this stream)
-    decode_errors: int = 0
-    out_of_order_samples: int = 0  # not after the previous sample: dropped
-    timing: TimingCounts = field(default_factory=TimingCounts)  # written by the stream's timer
-
-    def as_dict(self) -> dict[str, Any]:
-        counts = {k: v for k, v in asdict(self).items() if k != "timing"}
-        return {**counts, **asdict(self.timing), "dropped_frames": self.timing.dropped_frames}
 
 
 class PolarSession:
@@ -150,7 +104,9 @@ class PolarSession:
         log: logging.Logger | None = None,
         capture: CaptureWriter | None = None,
         rng: random.Random | None = None,
+        watchdog: bool = True,
     ) -> None:
+        """``watchdog`` False: no stall detection (a replay plays its capture's silences as they were)."""
         self.config = config
         self.scanner = scanner
         self.connect = connect
@@ -163,36 +119,51 @@ class PolarSession:
         self.listeners: list[Callable[[dict[str, Any]], None]] = []
         self._warnings = RateLimitedLog(self.log.warning, period=10.0, monotonic=clock)
         self._latency_ns = round(config.ble_latency * NS)
+        self.data = DataPath(
+            sink,
+            clock=clock,
+            emit=self._emit,
+            log=self.log,
+            warnings=self._warnings,
+            latency_ns=self._latency_ns,
+            on_data=self._data_seen,
+        )
+        self.channel = ControlPointChannel(
+            config.response_timeout,
+            record=lambda op, char, data: self._record(op, char, data),
+            on_stop=self._on_device_stop,
+            warn=lambda text: self._warnings.report("cp", text, "indication(s)"),
+        )
+        self.watchdog = StreamWatchdog() if watchdog else None
         # device
         self.family: Family | None = None
         self.device_id: str | None = None
         self.advert: Advertisement | None = None
         self.battery: int | None = None
+        self.mtu: int | None = None
+        self.sdk_mode = False
         # state
         self.state = "idle"
         self.error: str | None = None
         self.connections = 0
         self.reconnects = 0
         self.device_stops = 0
-        self.unexpected_notifications = 0
-        self.stats: dict[str, StreamStats] = {}
-        self._active: dict[int, ActiveStream] = {}  # by PMD measurement
-        self._hr_streams: dict[str, ActiveStream] = {}  # hr / rr
-        self._opened: dict[str, OutputStream] = {}
-        self._last_stamp: dict[str, int] = {}
-        self._mapper = DeviceClockMapper(latency_ns=self._latency_ns)
-        self._drift_reported = False
-        self._pending: tuple[int, int, asyncio.Future[cp.ControlPointResponse], bytearray] | None = None
+        self.stalls = 0
+        self.stall_reconnects = 0
         self._client: BleClient | None = None
-        self._disconnected: asyncio.Event | None = None
+        self._reconnect: asyncio.Event | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._tasks: set[asyncio.Task[Any]] = set()
+
+    @property
+    def stats(self) -> dict[str, StreamStats]:
+        return self.data.stats
 
     # ------------------------------------------------------------------------------------------
     # Events and status
     def _emit(self, event: str, marker: bool = False, **fields: Any) -> None:
         item = {"event": event, "t": self.clock(), **fields}
-        if marker and "markers" in self._opened:
+        if marker and "markers" in self.data.opened:
             self.sink.marker("markers", float(fields.get("at", item["t"])), json.dumps(item, sort_keys=True))
         for listener in list(self.listeners):
             listener(item)
@@ -202,7 +173,7 @@ class PolarSession:
         self._emit("state", state=state, **fields)
 
     def status(self) -> dict[str, Any]:
-        estimate = self._mapper.estimate()
+        estimate = self.data.mapper.estimate()
         return {
             "state": self.state,
             "error": self.error,
@@ -214,11 +185,16 @@ class PolarSession:
                 "family": self.family.name if self.family else None,
             },
             "battery": self.battery,
+            "mtu": self.mtu,
+            "sdk_mode": self.sdk_mode,
             "connections": self.connections,
             "reconnects": self.reconnects,
             "device_stops": self.device_stops,
-            "unexpected_notifications": self.unexpected_notifications,
-            "drift_ppm": round(self._mapper.drift_ppm, 3),
+            "stalls": self.stalls,
+            "stall_reconnects": self.stall_reconnects,
+            "mtu_refusals": self.channel.mtu_refusals,
+            "unexpected_notifications": self.channel.unexpected + self.data.unexpected,
+            "drift_ppm": round(self.data.mapper.drift_ppm, 3),
             "clock_offset_s": None if estimate is None else estimate.offset_ns / NS,
             "streams": {key: s.as_dict() for key, s in self.stats.items()},
         }
@@ -250,6 +226,12 @@ class PolarSession:
         if stop.is_set():
             raise Stopped()
         raise TimeoutError()
+
+    def _spawn(self, awaitable: Awaitable[Any]) -> asyncio.Task[Any]:
+        task = asyncio.ensure_future(awaitable)
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+        return task
 
     # ------------------------------------------------------------------------------------------
     # Life cycle
@@ -329,7 +311,7 @@ class PolarSession:
                 f"{advert.name or advert.address} is not a supported Polar sensor ({known})"
             )
         device_id = device_id_of(advert.name) or advert.address.replace(":", "").replace("-", "")[-8:].upper()
-        streams = self.config.streams or list(family.default_streams)
+        streams = self._streams_for(family)
         missing = [s for s in streams if s not in family.streams]
         if missing:
             raise UnsupportedError(
@@ -338,12 +320,21 @@ class PolarSession:
             )
         return family, device_id, streams
 
+    def _streams_for(self, family: Family) -> list[str]:
+        """The streams asked for; by default the family's, without what SDK mode switches off."""
+        if self.config.streams:
+            return list(self.config.streams)
+        defaults = list(family.default_streams)
+        if self.config.sdk_mode:
+            defaults = [s for s in defaults if not STREAM_KINDS[s].computed]
+        return defaults
+
     async def _connect_and_stream(self, advert: Advertisement, stop: asyncio.Event) -> bool:
         family, device_id, streams = self._identify(advert)
         self.family, self.device_id, self.advert = family, device_id, advert
         loop = self._loop or asyncio.get_running_loop()
         disconnected = asyncio.Event()
-        self._disconnected = disconnected
+        self._reconnect = reconnect = asyncio.Event()
 
         def on_disconnect() -> None:
             loop.call_soon_threadsafe(disconnected.set)
@@ -357,7 +348,9 @@ class PolarSession:
             raise ConnectionLostError(
                 f"connecting to {advert.name} took longer than {self.config.connect_timeout:g} s"
             ) from None
-        self._reset_timing()
+        self.data.reset_timing()
+        self.channel.reset()
+        await self._read_mtu(client, streams, stop)
         if self.capture is not None:
             self.capture.note(
                 device={
@@ -366,9 +359,11 @@ class PolarSession:
                     "id": device_id,
                     "family": family.name,
                 },
+                mtu=self.mtu,
                 t=self.clock(),
             )
         started: list[ActiveStream] = []
+        watching: asyncio.Task[None] | None = None
         try:
             self._set_state("starting")
             await self._start(client, streams, started, stop)
@@ -379,23 +374,56 @@ class PolarSession:
             self._set_state("streaming", streams=streams, connection=self.connections)
             self._emit("connected", marker=True, device=device_id, connection=self.connections)
             self.log.info(f"streaming {', '.join(streams)} from {advert.name} ({advert.address})")
-            await self._race(disconnected.wait(), stop)
-            self.error = f"lost the connection to {advert.name}"
-            self._emit("disconnected", marker=True, device=device_id)
-            self.log.warning(f"{self.error}; the LSL streams stay open while reconnecting")
+            if self.watchdog is not None:
+                watching = self._spawn(self._watch(client))
+            ended = await self._race(self._link_ends(disconnected, reconnect), stop)
+            if ended == "disconnected":
+                self.error = f"lost the connection to {advert.name}"
+                self._emit("disconnected", marker=True, device=device_id)
+                self.log.warning(f"{self.error}; the LSL streams stay open while reconnecting")
             return True
         except Stopped:
             raise
         finally:
+            if watching is not None:
+                watching.cancel()
+            if self.watchdog is not None:
+                self.watchdog.clear()
             await self._shutdown(client, started)
-            self._active.clear()
-            self._hr_streams.clear()
-            self._pending = None
+            self.data.end_connection()
+            self.channel.reset()
             self._client = None
 
+    @staticmethod
+    async def _link_ends(disconnected: asyncio.Event, reconnect: asyncio.Event) -> str:
+        """Wait until the link drops (``disconnected``) or the watchdog asks for a new one (``reconnect``)."""
+        waits = {asyncio.ensure_future(disconnected.wait()): "disconnected",
+                 asyncio.ensure_future(reconnect.wait()): "reconnect"}
+        try:
+            done, _ = await asyncio.wait(waits, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            for task in waits:
+                task.cancel()
+        return "disconnected" if any(waits[t] == "disconnected" for t in done) else "reconnect"
+
+    async def _read_mtu(self, client: BleClient, streams: list[str], stop: asyncio.Event) -> None:
+        """Ask for a large MTU and keep what the link has; warn when PMD frames cannot fit."""
+        try:
+            asked = client.request_mtu(PREFERRED_MTU)
+            self.mtu = await self._race(asked, stop, timeout=self.config.response_timeout)
+        except (BleError, TimeoutError) as exc:
+            self.log.info(f"the link's MTU is unknown ({exc or 'no answer'})")
+            self.mtu = None
+        self.channel.mtu = self.mtu
+        pmd = [STREAM_KINDS[s].label for s in streams if STREAM_KINDS[s].measurement is not None]
+        warning = short_mtu_warning(self.mtu, pmd)
+        if warning:
+            self._warnings.report("mtu", warning, "connection(s)")
+
     async def _shutdown(self, client: BleClient, started: list[ActiveStream]) -> None:
-        """Stop every started measurement, then disconnect (never the other way round)."""
+        """Stop every started measurement and SDK mode, then disconnect (never the other way round)."""
         if not client.is_connected:
+            self.sdk_mode = False
             return
         for stream in reversed(started):
             if stream.kind.measurement is None:
@@ -404,12 +432,14 @@ class PolarSession:
                 await self._request(client, cp.stop_request(stream.kind.measurement), allow_refusal=True)
             except (BleError, TimeoutError, PolarProtocolError) as exc:
                 self.log.warning(f"could not stop {stream.kind.label} before disconnecting: {exc}")
+        if self.sdk_mode:
+            try:
+                await self._request(client, cp.sdk_mode_request(False), allow_refusal=True)
+            except (BleError, TimeoutError, PolarProtocolError) as exc:
+                self.log.warning(f"could not switch SDK mode off before disconnecting: {exc}")
+            self.sdk_mode = False
         with contextlib.suppress(BleError, TimeoutError):
             await asyncio.wait_for(client.disconnect(), self.config.response_timeout)
-
-    def _reset_timing(self) -> None:
-        self._mapper = DeviceClockMapper(latency_ns=self._latency_ns)
-        self._drift_reported = False
 
     # ------------------------------------------------------------------------------------------
     # Starting streams
@@ -425,32 +455,44 @@ class PolarSession:
             self.battery = _decode_battery(data)
             if self.battery < 15:
                 self.log.warning(f"battery at {self.battery} %: replace or charge it before a session")
-        if pmd:
+        if pmd or self.config.sdk_mode:
             features_data = await self._race(client.read_gatt_char(PMD_CONTROL_POINT), stop)
             self._record("read", PMD_CONTROL_POINT, features_data)
             features = cp.decode_features(features_data)
+            offered = ", ".join(sorted(m.name.lower() for m in features)) or "nothing"
             missing = [k.key for k in pmd if k.measurement not in features]
             if missing:
-                offered = ", ".join(sorted(m.name.lower() for m in features)) or "nothing"
                 raise UnsupportedError(
-                    f"{self.advert.name if self.advert else 'the device'} does not offer "
-                    f"{', '.join(missing)} (its PMD features: {offered})"
+                    f"{self._device_name()} does not offer {', '.join(missing)} (its PMD features: {offered})"
                 )
-            # Subscribe to the control point and the data before sending any start.
+            if self.config.sdk_mode and not cp.has_sdk_mode(features_data):
+                raise UnsupportedError(
+                    f"sdk_mode: {self._device_name()} has no SDK mode (its PMD features: {offered}); "
+                    "run without --sdk-mode"
+                )
+            # Subscribe to the control point and the data before sending any request.
             await self._race(client.start_notify(PMD_CONTROL_POINT, self._on_control_point), stop)
             await self._race(client.start_notify(PMD_DATA, self._on_data), stop)
+            if self.config.sdk_mode:
+                await self._race(self._request(client, cp.sdk_mode_request(True)), stop)
+                self.sdk_mode = True
+                self.log.info(f"SDK mode on: {self._device_name()} computes no HR, RR or PPI now")
         if heart:
             await self._race(client.start_notify(HEART_RATE_MEASUREMENT, self._on_heart_rate), stop)
             for kind in heart:
                 stream = ActiveStream(kind, rate=kind.nominal_rate or 0.0)
                 if kind.key == "rr":
-                    stream.beats = BeatTimer(counts=self._stream_stats(kind, stream.rate).timing)
-                self._hr_streams[kind.key] = stream
+                    stream.beats = BeatTimer(counts=self.data.stream_stats(kind, stream.rate).timing)
+                self.data.hr_streams[kind.key] = stream
                 self._open_output(kind, stream.rate)
+            self._watch_source(heart[0])
         for kind in pmd:
             stream = await self._start_measurement(client, kind, stop)
             started.append(stream)
         self._open_markers()
+
+    def _device_name(self) -> str:
+        return self.advert.name or self.advert.address if self.advert else "the device"
 
     async def _start_measurement(
         self, client: BleClient, kind: StreamKind, stop: asyncio.Event
@@ -470,16 +512,17 @@ class PolarSession:
         stream.factor = float(factors[0]) if factors else 1.0
         if kind.measurement == Measurement.PPI:
             stream.rate = 0.0
-            counts = self._stream_stats(kind, stream.rate).timing
+            counts = self.data.stream_stats(kind, stream.rate).timing
             stream.beats = BeatTimer(max_lag_ns=PPI_MAX_LAG_NS, counts=counts)
         else:
             reported = stream.selected.get(cp.SettingType.SAMPLE_RATE, 0)
-            stream.rate = float(actual_rate(self.family, kind.key, reported))
-            if stream.rate <= 0:
+            announced = float(actual_rate(self.family, kind.key, reported))
+            if announced <= 0:
                 raise UnsupportedError(f"{kind.label}: the device gave no sample rate")
-            stream.timer = FrameTimer(stream.rate, counts=self._stream_stats(kind, stream.rate).timing)
-        self._active[m] = stream
+            self.data.begin_timing(stream, announced)
+        self.data.active[m] = stream
         self._open_output(kind, stream.rate)
+        self._watch_source(kind)
         self.log.info(
             f"{kind.label} started: "
             + ", ".join(f"{k.name.lower()} {v}" for k, v in stream.selected.items())
@@ -508,45 +551,28 @@ class PolarSession:
             ints = sorted({int(v) for v in values})
             name, want = wanted.get(setting, ("", 0))
             if want and want not in ints:
+                hint = "" if self.sdk_mode else " (an SDK-mode value? see --sdk-mode)"
                 raise UnsupportedError(
-                    f"{name} {want}: {self.advert.name if self.advert else 'the device'} offers "
-                    f"{', '.join(str(v) for v in ints)} for {kind.label}"
+                    f"{name} {want}: {self._device_name()} offers "
+                    f"{', '.join(str(v) for v in ints)} for {kind.label}{hint}"
                 )
             selected[setting] = want or ints[-1]
         return selected
 
     def _open_output(self, kind: StreamKind, rate: float) -> None:
         assert self.family is not None and self.device_id is not None
-        existing = self._opened.get(kind.key)
-        if existing is not None:
-            if existing.nominal_rate != rate:
-                raise UnsupportedError(
-                    f"{kind.label} restarted at {rate:g} Hz but its LSL stream declares "
-                    f"{existing.nominal_rate:g} Hz"
-                )
-            return
         name = stream_name(self.family, self.device_id, kind.key, self.config.name_prefix)
-        stream = OutputStream(
-            key=kind.key,
-            name=name,
-            type=kind.label,
-            channels=kind.channels,
-            units=kind.units,
-            nominal_rate=rate,
-            source_id=f"{self.device_id}-{kind.label}",
-            device=self._device_description(),
-        )
-        self.sink.open(stream)
-        self._opened[kind.key] = stream
-        self._stream_stats(kind, rate)
-        self._emit("stream_opened", name=name, rate=rate, channels=len(kind.channels))
-
-    def _stream_stats(self, kind: StreamKind, rate: float) -> StreamStats:
-        """The session's counts for ``kind`` (created at its first connection, kept across reconnects)."""
-        return self.stats.setdefault(kind.key, StreamStats(rate_hz=rate))
+        source_id = f"{self.device_id}-{kind.label}"
+        device = self._device_description()
+        declared = self.data.declare(kind, rate, name=name, source_id=source_id, device=device)
+        if not declared:
+            raise UnsupportedError(
+                f"{kind.label} restarted at {rate:g} Hz but its LSL stream declares "
+                f"{self.data.opened[kind.key].nominal_rate:g} Hz"
+            )
 
     def _open_markers(self) -> None:
-        if "markers" in self._opened or self.family is None or self.device_id is None:
+        if "markers" in self.data.opened or self.family is None or self.device_id is None:
             return
         name = stream_name(self.family, self.device_id, "Markers", self.config.name_prefix)
         stream = OutputStream(
@@ -561,7 +587,7 @@ class PolarSession:
             device=self._device_description(),
         )
         self.sink.open(stream)
-        self._opened["markers"] = stream
+        self.data.opened["markers"] = stream
 
     def _device_description(self) -> dict[str, str]:
         return {
@@ -576,80 +602,116 @@ class PolarSession:
     async def _request(
         self, client: BleClient, payload: bytes, allow_refusal: bool = False
     ) -> cp.ControlPointResponse:
-        op, m = payload[0], payload[1]
-        loop = asyncio.get_running_loop()
-        future: asyncio.Future[cp.ControlPointResponse] = loop.create_future()
-        self._pending = (op, m, future, bytearray())
-        try:
-            self._record("write", PMD_CONTROL_POINT, payload)
-            await client.write_gatt_char(PMD_CONTROL_POINT, payload, response=True)
-            try:
-                response = await asyncio.wait_for(future, self.config.response_timeout)
-            except TimeoutError:
-                raise ConnectionLostError(
-                    f"the device did not answer '{payload.hex(' ')}' within "
-                    f"{self.config.response_timeout:g} s"
-                ) from None
-        finally:
-            self._pending = None
-        accepted = response.ok or (
-            op in (cp.OpCode.START, cp.OpCode.STOP) and response.status == cp.Status.ALREADY_IN_STATE
-        )
-        if not accepted:
-            refused = cp.ControlPointRefused(op, m, response.status)
-            if allow_refusal:
-                self.log.warning(str(refused))
-            elif response.status in _UNSUPPORTED_STATUSES:
-                raise UnsupportedError(str(refused))
-            else:
-                raise refused
-        return response
+        return await self.channel.request(client, payload, allow_refusal)
 
     def _on_control_point(self, _char: Any, data: bytearray) -> None:
-        self._record("notify", PMD_CONTROL_POINT, bytes(data))
-        try:
-            message = cp.decode_control_point(bytes(data))
-        except PolarProtocolError as exc:
-            self._warnings.report("cp", f"unreadable control point indication: {exc}", "indication(s)")
-            return
-        if isinstance(message, cp.StopIndication):
-            self._on_device_stop(message)
-            return
-        pending = self._pending
-        if pending is None or pending[0] != message.op or pending[1] != message.measurement:
-            self.unexpected_notifications += 1
-            return
-        op, m, future, params = pending
-        params += message.params
-        if message.more:
-            return
-        if not future.done():
-            future.set_result(cp.ControlPointResponse(op, m, message.status, False, bytes(params)))
+        self.channel.on_indication(bytes(data))
 
     def _on_device_stop(self, message: cp.StopIndication) -> None:
         client = self._client
         for m in message.measurements:
-            stream = self._active.get(m)
+            stream = self.data.active.get(m)
             if stream is None:
                 continue
             self.device_stops += 1
             self._emit("device_stopped", marker=True, stream=stream.kind.label)
             self.log.warning(f"the device stopped {stream.kind.label} by itself; restarting it")
             if client is not None:
-                task = asyncio.ensure_future(self._restart(client, stream))
-                self._tasks.add(task)
-                task.add_done_callback(self._tasks.discard)
+                self._spawn(self._restart(client, stream))
 
-    async def _restart(self, client: BleClient, stream: ActiveStream) -> None:
+    async def _restart(self, client: BleClient, stream: ActiveStream, stop_first: bool = False) -> bool:
+        """Start a measurement again (after stopping it, for a silent one); False if that failed."""
         assert stream.kind.measurement is not None
+        m = int(stream.kind.measurement)
         try:
-            await self._request(client, cp.start_request(int(stream.kind.measurement), stream.selected))
+            if stop_first:
+                await self._request(client, cp.stop_request(m), allow_refusal=True)
+            await self._request(client, cp.start_request(m, stream.selected))
         except (BleError, cp.ControlPointRefused, UnsupportedError, PolarProtocolError) as exc:
             self.log.error(f"could not restart {stream.kind.label}: {exc}")
-            return
+            return False
         if stream.timer is not None:
             stream.timer.reset()
+        self._watch_source(stream.kind)
         self._emit("stream_restarted", stream=stream.kind.label)
+        return True
+
+    # ------------------------------------------------------------------------------------------
+    # Watchdog
+    def _watch_source(self, kind: StreamKind) -> None:
+        """(Re)arm the watchdog for ``kind``'s source: first data due within its start timeout."""
+        if self.watchdog is None:
+            return
+        start = self.config.start_timeout or kind.first_data_s
+        stall = max(self.config.stall_timeout, kind.min_stall_s)
+        self.watchdog.watch(kind.source, self.clock(), start, stall)
+
+    def _data_seen(self, source: str) -> None:
+        if self.watchdog is None:
+            return
+        first = self.watchdog.data(source, self.clock())
+        if first is not None and first > LATE_FIRST_DATA_S:
+            self.log.info(f"{self._source_label(source)}: first data {first:.1f} s after its start")
+
+    def _source_keys(self, source: str) -> list[str]:
+        """The streams a watched source feeds (``hr``: the HR and RR streams)."""
+        if source == "hr":
+            return list(self.data.hr_streams)
+        return [source] if source in self.stats else []
+
+    def _source_label(self, source: str) -> str:
+        return "/".join(STREAM_KINDS[k].label for k in self._source_keys(source)) or source
+
+    async def _watch(self, client: BleClient) -> None:
+        """Check the watchdog at its next deadline (at least every ``WATCHDOG_TICK``) and act on alarms."""
+        assert self.watchdog is not None
+        while True:
+            due = self.watchdog.next_due()
+            wait = WATCHDOG_TICK if due is None else min(WATCHDOG_TICK, max(0.0, due - self.clock()))
+            await asyncio.sleep(wait)
+            for alarm in self.watchdog.check(self.clock()):
+                await self._on_alarm(client, alarm)
+
+    async def _on_alarm(self, client: BleClient, alarm: Alarm) -> None:
+        label = self._source_label(alarm.source)
+        self.stalls += 1
+        for key in self._source_keys(alarm.source):
+            self.stats[key].stalls += 1
+        self._emit(
+            "stall",
+            marker=True,
+            stream=label,
+            phase=alarm.phase,
+            silent_s=round(alarm.silent_s, 3),
+            since=alarm.since,
+            action=alarm.action,
+        )
+        what = "since its start" if alarm.phase == START else "while streaming"
+        if alarm.action == RESTART:
+            self.log.warning(f"{label}: no data for {alarm.silent_s:.1f} s {what}, no disconnect: restarting")
+            if await self._restart_source(client, alarm.source):
+                return
+            reason = f"{label} could not be restarted"
+        else:
+            reason = f"{label} stayed silent after a restart ({alarm.silent_s:.1f} s {what})"
+        self.stall_reconnects += 1
+        self.log.warning(f"{reason}: reconnecting")
+        self._emit("reconnecting", marker=True, reason=reason)
+        if self._reconnect is not None:
+            self._reconnect.set()
+
+    async def _restart_source(self, client: BleClient, source: str) -> bool:
+        if source != "hr":
+            stream = next((s for s in self.data.active.values() if s.kind.key == source), None)
+            return stream is not None and await self._restart(client, stream, stop_first=True)
+        try:
+            await client.stop_notify(HEART_RATE_MEASUREMENT)
+            await client.start_notify(HEART_RATE_MEASUREMENT, self._on_heart_rate)
+        except BleError as exc:
+            self.log.error(f"could not subscribe to the heart rate again: {exc}")
+            return False
+        self._watch_source(STREAM_KINDS["hr"])
+        return True
 
     # ------------------------------------------------------------------------------------------
     # Data
@@ -657,134 +719,13 @@ class PolarSession:
         arrival = self._now_ns()
         raw = bytes(data)
         self._record("notify", PMD_DATA, raw, arrival / NS)
-        stream = self._active.get(raw[0] & 0x3F) if raw else None
-        if stream is None:
-            self.unexpected_notifications += 1
-            return
-        stats = self.stats[stream.kind.key]
-        try:
-            frame = decode_pmd_frame(raw, stream.channels, stream.resolution)
-        except PolarProtocolError as exc:
-            stats.decode_errors += 1
-            self._warnings.report(
-                f"decode-{stream.kind.key}",
-                f"{stream.kind.label}: undecodable frame ({exc})",
-                "frame(s) dropped",
-            )
-            return
-        stats.frames += 1
-        if stream.beats is not None:
-            self._push_ppi(stream, frame, arrival)
-            return
-        assert stream.timer is not None
-        placement = stream.timer.place(frame.timestamp_ns, frame.sample_count, arrival)
-        if placement.dropped:
-            self._emit(
-                "frame_dropped",
-                marker=True,
-                stream=stream.kind.label,
-                reason=placement.kind,
-                device_ns=frame.timestamp_ns,
-            )
-            return
-        if placement.kind == "clock_jump":
-            self._reset_timing()
-            for other in self._active.values():
-                if other is not stream and other.timer is not None:
-                    other.timer.reset()
-            self._emit("clock_jump", marker=True, stream=stream.kind.label, device_ns=frame.timestamp_ns)
-        self._mapper.observe(frame.timestamp_ns, arrival)
-        if not self._drift_reported and self._mapper.drift_estimated:
-            self._drift_reported = True
-            estimate = self._mapper.estimate()
-            self._emit(
-                "clock_drift",
-                marker=True,
-                drift_ppm=round(self._mapper.drift_ppm, 3),
-                offset_s=None if estimate is None else estimate.offset_ns / NS,
-            )
-        host = self._mapper.to_host_many(placement.device_ns)
-        if placement.kind == "gap":
-            start, end = (
-                self._mapper.to_host(placement.gap_from_ns),
-                self._mapper.to_host(placement.gap_to_ns),
-            )
-            self._emit(
-                "gap",
-                marker=True,
-                at=start / NS,
-                stream=stream.kind.label,
-                missing=placement.missing,
-                start=start / NS,
-                end=end / NS,
-            )
-            self._warnings.report(
-                f"gap-{stream.kind.key}",
-                f"{stream.kind.label}: {placement.missing} sample(s) lost in transmission (gap marker sent)",
-                "gap(s)",
-            )
-        self._push(stream.kind.key, host, self._scaled(frame, stream))
-
-    @staticmethod
-    def _scaled(frame: PmdFrame, stream: ActiveStream) -> list[list[float]]:
-        """Sample values in the stream's unit: compressed frames times the device's conversion factor."""
-        factor = stream.factor if frame.compressed else 1.0
-        if frame.compressed and frame.measurement == Measurement.ACC and frame.frame_type == 0:
-            factor *= 1000.0  # compressed ACC type 0 comes in G
-        if factor == 1.0:
-            return [[float(v) for v in row] for row in frame.samples]
-        return [[v * factor for v in row] for row in frame.samples]
-
-    def _push_ppi(self, stream: ActiveStream, frame: PmdFrame, arrival: int) -> None:
-        assert stream.beats is not None
-        # Every interval goes to the timer, which skips and counts those <= 0.
-        stamps = stream.beats.place([row[1] * 1_000_000 for row in frame.samples], arrival - self._latency_ns)
-        rows = [row for row in frame.samples if row[1] > 0]
-        self._push(
-            stream.kind.key, stamps, [[float(r[1]), float(r[2]), float(r[0]), float(r[3])] for r in rows]
-        )
+        self.data.on_pmd(raw, arrival)
 
     def _on_heart_rate(self, _char: Any, data: bytearray) -> None:
         arrival = self._now_ns()
         raw = bytes(data)
         self._record("notify", HEART_RATE_MEASUREMENT, raw, arrival / NS)
-        try:
-            hr = decode_heart_rate(raw)
-        except PolarProtocolError as exc:
-            for key in self._hr_streams:
-                self.stats[key].decode_errors += 1
-            self._warnings.report(
-                "decode-hr", f"HR: undecodable notification ({exc})", "notification(s) dropped"
-            )
-            return
-        at = arrival - self._latency_ns
-        if "hr" in self._hr_streams:
-            self.stats["hr"].frames += 1
-            self._push("hr", [at], [[float(hr.bpm)]])
-        rr_stream = self._hr_streams.get("rr")
-        if rr_stream is not None and rr_stream.beats is not None and hr.rr_1024:
-            self.stats["rr"].frames += 1
-            stamps = rr_stream.beats.place([(rr * NS * 2 + 1024) // 2048 for rr in hr.rr_1024], at)
-            valid = [rr for rr in hr.rr_1024 if rr > 0]  # the intervals the timer placed
-            self._push("rr", stamps, [[rr * 1000.0 / 1024.0] for rr in valid])
-
-    def _push(self, key: str, host_ns: list[int], rows: list[list[float]]) -> None:
-        """Push samples in time order; a sample not after the previous one is dropped and counted."""
-        last = self._last_stamp.get(key)
-        stats = self.stats[key]
-        keep_t, keep_rows = [], []
-        for t, row in zip(host_ns, rows, strict=True):
-            if last is not None and t <= last:
-                stats.out_of_order_samples += 1
-                continue
-            keep_t.append(t)
-            keep_rows.append(row)
-            last = t
-        if not keep_t:
-            return
-        self._last_stamp[key] = keep_t[-1]
-        stats.samples += len(keep_t)
-        self.sink.push(key, [t / NS for t in keep_t], keep_rows)
+        self.data.on_heart_rate(raw, arrival)
 
 
 async def scan_for_polar(scanner: Scanner, timeout: float) -> list[Advertisement]:

@@ -6,7 +6,8 @@ date 2019-01-01 by default) and notifies it after a latency plus random BLE jitt
 slowly varying rhythm; the ECG has an R wave at every beat; the Heart Rate Measurement reports
 the beats' RR intervals about once a second. Frames can be lost or duplicated on purpose. The
 truth (host time of every ECG sample and beat) comes back with the timeline, so tests can
-measure the streamer's timestamp error.
+measure the streamer's timestamp error. :func:`write_capture` writes one as a capture file (the
+shape ``polar_streamer --capture`` writes), for ``--replay`` soaks and benchmarks.
 """
 
 from __future__ import annotations
@@ -15,16 +16,21 @@ import bisect
 import math
 import random
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from hri_physio_bridge.polar import control_point as cp
+from hri_physio_bridge.polar.capture import CaptureWriter
 from hri_physio_bridge.polar.encode import encode_acc_frame, encode_ecg_frame, encode_heart_rate
 from hri_physio_bridge.polar.fake import Notification
-from hri_physio_bridge.polar.gatt import HEART_RATE_MEASUREMENT, PMD_DATA
+from hri_physio_bridge.polar.gatt import BATTERY_LEVEL, HEART_RATE_MEASUREMENT, PMD_CONTROL_POINT, PMD_DATA
 from hri_physio_bridge.polar.protocol import Measurement
 
 NS = 1_000_000_000
 #: 2019-01-01T00:00:00Z in ns since 2000-01-01: where an H10's clock starts after power-off.
 H10_RESET_TIME_NS = 599_616_000_000_000_000
+
+#: The parameters of an H10's real answer to a start (``F0 02 00 00 00 00``): one byte, no settings.
+H10_START_PARAMS = b"\x00"
 
 H10_SETTINGS = {
     Measurement.ECG: cp.encode_offered_settings(
@@ -136,3 +142,40 @@ def synthetic_h10(
             t += 1.0
     out.timeline.sort(key=lambda n: n.t)
     return out
+
+
+def write_capture(
+    path: str | Path,
+    syn: SyntheticH10,
+    *,
+    name: str = "Polar H10 0A1B2C3D",
+    address: str = "A0:9E:1A:00:00:01",
+    host_start: float = 5000.0,
+    battery: int = 90,
+) -> int:
+    """Write ``syn`` as a capture file: the reads and the settings / start exchange of every
+    measurement it has (answered as a real H10 answers), then its notifications. Returns the
+    number of notifications written."""
+    writer = CaptureWriter(path, {"program": "synthetic", "synthetic": True,
+                                  "device": {"name": name, "address": address}})
+    try:
+        t = host_start
+        writer.record(t, "read", PMD_CONTROL_POINT, cp.encode_features(set(syn.features)))
+        writer.record(t, "read", BATTERY_LEVEL, bytes([battery]))
+        measurements = sorted({n.data[0] for n in syn.timeline if n.char == PMD_DATA})
+        for m in measurements:
+            offered = cp.decode_settings(syn.settings.get(m, b""))
+            chosen = {k: int(values[-1]) for k, values in offered.items() if k != cp.SettingType.FACTOR}
+            t += 0.01
+            writer.record(t, "write", PMD_CONTROL_POINT, cp.get_settings_request(m))
+            answer = cp.encode_response(cp.OpCode.GET_SETTINGS, m, params=syn.settings.get(m, b""))
+            writer.record(t + 0.005, "notify", PMD_CONTROL_POINT, answer)
+            writer.record(t + 0.01, "write", PMD_CONTROL_POINT, cp.start_request(m, chosen))
+            writer.record(t + 0.015, "notify", PMD_CONTROL_POINT,
+                          cp.encode_response(cp.OpCode.START, m, params=H10_START_PARAMS))
+        start = t + 0.1
+        for note in syn.timeline:
+            writer.record(start + note.t, "notify", note.char, note.data)
+    finally:
+        writer.close()
+    return len(syn.timeline)

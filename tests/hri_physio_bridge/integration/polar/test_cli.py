@@ -87,6 +87,9 @@ def test_help_lists_the_devices_valid_values() -> None:
         "--device",
         "H10: ECG 130 Hz; ACC 25, 50, 100, 200 Hz at 2, 4, 8 G",
         "Verity Sense: PPG 55 Hz",
+        "--sdk-mode",
+        "--stall-timeout",
+        "--start-timeout",
         "--capture",
         "--replay",
     ):

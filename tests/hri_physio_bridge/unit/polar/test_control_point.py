@@ -92,7 +92,7 @@ def test_malformed_indications(data: bytes) -> None:
 @pytest.mark.parametrize(
     "params, problem",
     [
-        (b"\x00", "header"),
+        (b"\x00\x01\x82\x00\x01", "entry header at byte 4"),
         (b"\x09\x01\x00", "unknown setting"),
         (b"\x00\x02\x82\x00", "past the end"),
     ],
@@ -113,3 +113,48 @@ def test_fuzz_control_point(data: bytes) -> None:
     for parse in (cp.decode_control_point, cp.decode_settings, cp.decode_features):
         with contextlib.suppress(PolarProtocolError):
             parse(data)
+
+
+@pytest.mark.parametrize("params", [b"", b"\x00", b"\x05"])
+def test_one_parameter_byte_or_less_is_no_settings(params: bytes) -> None:
+    """An H10 answers "start ECG" with F0 02 00 00 00 00: one parameter byte that carries nothing."""
+    assert cp.decode_settings(params) == {}
+    response = cp.decode_control_point(bytes([0xF0, 0x02, 0x00, 0x00, 0x00]) + params)
+    assert response.ok and cp.decode_settings(response.params) == {}
+
+
+def test_start_answer_with_a_conversion_factor() -> None:
+    response = cp.decode_control_point(bytes.fromhex("F0 02 01 00 00 05 01 00 00 80 3F"))
+    assert cp.decode_settings(response.params) == {cp.SettingType.FACTOR: [1.0]}
+
+
+@pytest.mark.parametrize(
+    "answer, op, measurement, expected",
+    [
+        ("F0 01 00 00 00 00 01 82 00", cp.OpCode.GET_SETTINGS, Measurement.ECG, True),  # named, success
+        ("F0 00 01 0A", cp.OpCode.GET_SETTINGS, Measurement.PPG, True),  # error naming no op
+        ("F0 00 01 0A", cp.OpCode.START, Measurement.PPG, True),
+        ("F0 00 01 0A", cp.OpCode.GET_SETTINGS, Measurement.ECG, False),  # another measurement type
+        ("F0 00 02 00 00", cp.OpCode.START, Measurement.ACC, False),  # a success must name its op
+        ("F0 03 00 00 00", cp.OpCode.START, Measurement.ECG, False),  # the answer to another request
+        ("F0 02 82 0C", cp.OpCode.START, Measurement.ACC, True),  # bit 7 (offline) is not the type
+    ],
+)
+def test_an_answer_matches_its_request_by_measurement_type(
+    answer: str, op: int, measurement: int, expected: bool
+) -> None:
+    response = cp.decode_control_point(bytes.fromhex(answer))
+    assert cp.answers(response, op, measurement) is expected
+
+
+def test_sdk_mode_requests_and_feature_bit() -> None:
+    assert cp.sdk_mode_request(True) == bytes.fromhex("02 09")
+    assert cp.sdk_mode_request(False) == bytes.fromhex("03 09")
+    verity = bytes.fromhex("0F 6E 02 00")  # PPG, ACC, PPI, gyro, magnetometer + SDK mode
+    assert cp.has_sdk_mode(verity) and not cp.has_sdk_mode(bytes.fromhex("0F 05 00 00"))
+    assert cp.decode_features(verity) == {
+        Measurement.PPG, Measurement.ACC, Measurement.PPI, Measurement.GYRO, Measurement.MAGNETOMETER
+    }
+    assert cp.has_sdk_mode(cp.encode_features({Measurement.PPG}, sdk_mode=True))
+    refused = cp.ControlPointRefused(cp.OpCode.START, cp.SDK_MODE, cp.Status.NOT_SUPPORTED)
+    assert str(refused).startswith("start SDK mode: the device does not support")

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from helpers.polar import run_session
+from helpers.polar import NAME, h10, run_session, writes
 from hri_physio_bridge.polar import control_point as cp
 from hri_physio_bridge.polar.ble import BleUnavailableError
 from hri_physio_bridge.polar.capture import CaptureWriter, read_capture
@@ -27,43 +27,13 @@ from hri_physio_bridge.polar.fake import (
     FakeScanner,
     Notification,
     fake_client_factory,
+    play_through,
 )
 from hri_physio_bridge.polar.gatt import HEART_RATE_MEASUREMENT, PMD_CONTROL_POINT, PMD_DATA
 from hri_physio_bridge.polar.output import MemorySink
 from hri_physio_bridge.polar.protocol import Measurement
 from hri_physio_bridge.polar.session import PolarSession
-from hri_physio_bridge.polar.synthetic import synthetic_h10
-
-NAME = "Polar H10 0A1B2C3D"
-
-
-def h10(clock: FakeClock, seconds: float = 30.0, **kwargs) -> tuple[FakePolarDevice, object]:
-    device_options = {
-        k: kwargs.pop(k)
-        for k in (
-            "disconnect_after",
-            "connect_failures",
-            "pairing_required",
-            "stop_indication_after",
-            "start_status",
-            "visible",
-        )
-        if k in kwargs
-    }
-    syn = synthetic_h10(seconds, **kwargs)
-    device = FakePolarDevice(
-        NAME,
-        features=syn.features,
-        settings=syn.settings,
-        timeline=syn.timeline,
-        clock=clock,
-        **device_options,
-    )
-    return device, syn
-
-
-def writes(device: FakePolarDevice) -> list[str]:
-    return [op[2] for op in device.operations if op[0] == "write"]
+from hri_physio_bridge.polar.virtual_time import run_virtual
 
 
 class CountingSink(MemorySink):
@@ -303,15 +273,10 @@ def test_capture_then_replay_gives_the_same_samples(tmp_path: Path) -> None:
             capture=capture,
             rng=random.Random(1),
         )
-        session.listeners.append(lambda e: device.release() if e.get("state") == "streaming" else None)
-        stop = asyncio.Event()
-        task = asyncio.ensure_future(session.run(stop))
-        await device.wait_finished()
-        stop.set()
-        await task
+        await play_through(session, device)
         return session
 
-    recorded = asyncio.run(record())
+    recorded = run_virtual(record(), clock)
     capture.close()
     lines = (tmp_path / "session.jsonl").read_text().splitlines()
     assert json.loads(lines[0])["format"] == "hri_physio.polar.capture"
