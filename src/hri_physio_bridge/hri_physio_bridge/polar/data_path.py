@@ -100,13 +100,9 @@ class DataPath:
         latency_ns: int = 0,
         on_data: Callable[[str], None] = lambda _source: None,
     ) -> None:
-        self.sink = sink
-        self.clock = clock
-        self._emit = emit
-        self.log = log
-        self._warnings = warnings
-        self.latency_ns = latency_ns
-        self._on_data_seen = on_data
+        self.sink, self.clock, self.log, self.latency_ns = sink, clock, log, latency_ns
+        # The session's ears: markers and status, rate-limited warnings, "data seen" for the watchdog.
+        self._emit, self._warnings, self._on_data_seen = emit, warnings, on_data
         self.stats: dict[str, StreamStats] = {}
         self.active: dict[int, ActiveStream] = {}  # PMD streams by measurement
         self.hr_streams: dict[str, ActiveStream] = {}  # hr / rr
