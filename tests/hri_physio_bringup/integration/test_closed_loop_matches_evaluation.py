@@ -41,6 +41,7 @@ from pathlib import Path
 import pytest
 
 from helpers import session_env
+from helpers.routines import TEN_MINUTES, short_routine
 from hri_physio_bridge import topics
 from hri_physio_coach.config import COACH_NODE, CoachConfig, CoachNodeConfig
 from hri_physio_coach.evaluate.compare import changes, compare_changes
@@ -61,6 +62,9 @@ PARTICIPANT_SEED = 1
 #: with both cores busy, 3 of 39 rule updates once missed a sample that way). 20x leaves the coach
 #: 150 ms of wall time; the guard and the 5-s marks cover the rest.
 SPEED = 20.0
+#: Ten minutes of routine hold what is compared: a calibration, rule updates in every exercise phase,
+#: every kind of conditioning activity and the predictive policy's plan.
+ROUTINE = TEN_MINUTES
 #: Rule updates fall on whole seconds from the session start in both: the same decision has the same time.
 TOLERANCE_S = 0.5
 HR_TOLERANCE_BPM = 0.01
@@ -99,14 +103,15 @@ def evaluated(folder: Path, policy: str = POLICY, age: float | None = None) -> l
 @pytest.fixture(scope="module")
 def session(tmp_path_factory: pytest.TempPathFactory, session_tag: str) -> Path:
     out = tmp_path_factory.mktemp("closed_loop")
-    command = [str(Path(sys.prefix) / "bin" / "hri_physio_session"), "--policy", POLICY,
+    command = [str(Path(sys.prefix) / "bin" / "hri_physio_session"), *short_routine(out, ROUTINE),
+               "--policy", POLICY,
                "--speed", f"{SPEED:g}", "--no-ecg", "--no-report", "--age", f"{AGE:g}",
                "--participant-seed", str(PARTICIPANT_SEED),
                "--device-id", f"SIM{session_tag}e2e", "--out", str(out)]
     run = subprocess.run(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                          text=True, timeout=400, cwd=out, env=session_env())
     assert run.returncode == 0, run.stdout
-    (folder,) = [p for p in out.iterdir() if p.is_dir()]
+    (folder,) = [p for p in out.iterdir() if p.is_dir()]  # the session's
     summary = json.loads((folder / "summary.json").read_text())
     assert summary["outcome"] == "finished", run.stdout
     return folder
@@ -153,7 +158,7 @@ def test_the_closed_loop_averages_the_heart_rate_the_evaluation_averages(session
     start = of(recorded, "session_start")[0]["t"]
     mine = {round(e["t"] - start, 3): e["inputs"] for e in of(recorded, "rule_update")}
     theirs = {round(e["t"], 3): e["inputs"] for e in of(expected, "rule_update")}
-    assert sorted(mine) == sorted(theirs) and len(mine) > 30
+    assert sorted(mine) == sorted(theirs) and len(mine) >= 15
 
     def same(a: dict, b: dict) -> bool:
         if a["n_valid"] != b["n_valid"] or (a["hr_mean"] is None) != (b["hr_mean"] is None):

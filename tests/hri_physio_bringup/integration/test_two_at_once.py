@@ -15,33 +15,19 @@ import time
 from pathlib import Path
 
 import pytest
-import yaml
 
-from helpers import SRC, session_env
+from helpers import session_env
+from helpers.routines import FOUR_AND_A_HALF_MINUTES, routine_seconds, short_routine
 
 pytestmark = [pytest.mark.ros, pytest.mark.lsl]
 
-PACKAGED = SRC / "hri_physio_coach" / "config"
-SESSION_SECONDS = 60 + 60 + 90 + 60
-
-
-def short_routine(folder: Path) -> list[str]:
-    routine = yaml.safe_load((PACKAGED / "exercise_routine.yaml").read_text())
-    keep = {"calibration": (0, None), "warm_up": (0, 60), "conditioning": (1, 90), "cool_down": (0, 60)}
-    for phase in routine["phases"]:
-        index, seconds = keep[phase["kind"]]
-        phase["activities"] = [phase["activities"][index]]
-        if seconds is not None:
-            phase["activities"][0]["duration"] = seconds
-    (folder / "routine.yaml").write_text(yaml.safe_dump(routine))
-    (folder / "coach.yaml").write_text("calib_time: 60\n")
-    return ["--routine", str(folder / "routine.yaml"), "--conf", str(folder / "coach.yaml"), "--speed", "20",
-            "--no-ecg", "--no-record", "--no-report"]
+SHORT = FOUR_AND_A_HALF_MINUTES
+SESSION_SECONDS = routine_seconds(SHORT)
 
 
 def test_two_sessions_a_second_apart_each_run_alone(tmp_path: Path) -> None:
     env = session_env()  # each session chooses a domain of its own
-    options = short_routine(tmp_path)
+    options = [*short_routine(tmp_path, SHORT), "--speed", "20", "--no-ecg", "--no-record", "--no-report"]
     procs, logs = [], []
     for name in ("a", "b"):
         log = tempfile.TemporaryFile("w+")  # noqa: SIM115 - closed below
