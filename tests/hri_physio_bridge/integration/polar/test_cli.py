@@ -114,6 +114,8 @@ def test_replay_a_capture_onto_lsl(tmp_path: Path) -> None:
             prefix,
             "--streams",
             "ecg,hr",
+            "--replay-speed",  # 3 s of capture played over 12 s: time for a busy machine to resolve it
+            "0.25",
             "--status-period",
             "0.5",
         ],
@@ -150,6 +152,8 @@ def test_sigterm_stops_cleanly_mid_stream() -> None:
         "hri_physio_bridge.nodes.polar_streamer",
         "--replay",
         str(CAPTURE),
+        "--replay-speed",  # 10 s of capture over 40 s: still streaming when a busy machine has resolved it
+        "0.25",
         "--name-prefix",
         prefix,
     ]
