@@ -328,10 +328,11 @@ class FakePolarDevice:
             self._on_disconnect()
 
     def _lose(self) -> None:
+        """The link is gone: streams and subscriptions end; SDK mode stays (Polar: only a stop request
+        or switching the sensor off ends it)."""
         self.connected = False
         self.active.clear()
         self.subscriptions.clear()
-        self.sdk_mode = False  # SDK mode ends when the sensor restarts its session; kept simple here
         if self._release is not None:
             self._release.clear()
 
