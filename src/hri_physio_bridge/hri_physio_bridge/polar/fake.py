@@ -279,9 +279,10 @@ class FakePolarDevice:
             return True
         if source in self._stalled:
             return False
-        quiet_until = self._quiet_until.get(source, float("-inf")) if isinstance(source, int) else 0.0
-        if isinstance(source, int) and (source not in self.active or self._now() < quiet_until):
-            return False
+        if isinstance(source, int) and (
+            source not in self.active or self._now() < self._quiet_until.get(source, float("-inf"))
+        ):
+            return False  # not started, or its first data is not due yet
         limit = self.stall_after.get(source)
         if limit is not None and self._sent.get(source, 0) >= limit:
             del self.stall_after[source]
