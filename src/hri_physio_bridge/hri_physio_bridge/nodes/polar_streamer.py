@@ -186,7 +186,7 @@ def main(argv: list[str] | None = None) -> int:
         "Bluetooth LE onto LSL as PolarH10/<id>/<stream> or PolarOH1/<id>/<stream>, with per-sample "
         "timestamps mapped from the device clock onto the LSL clock, gap markers and automatic reconnection.",
         epilog=help_values() + "\n\nExit status: 0 stopped, 1 gave up (give_up_after), 2 configuration "
-        "problem, no Bluetooth, pairing required or a stream/setting the device does not offer.",
+        "problem, no Bluetooth, pairing required or a stream, setting or SDK mode the device does not offer.",
     )
 
 

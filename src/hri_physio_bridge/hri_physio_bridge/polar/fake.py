@@ -279,9 +279,10 @@ class FakePolarDevice:
             return True
         if source in self._stalled:
             return False
-        quiet_until = self._quiet_until.get(source, float("-inf")) if isinstance(source, int) else 0.0
-        if isinstance(source, int) and (source not in self.active or self._now() < quiet_until):
-            return False
+        if isinstance(source, int) and (
+            source not in self.active or self._now() < self._quiet_until.get(source, float("-inf"))
+        ):
+            return False  # not started, or its first data is not due yet
         limit = self.stall_after.get(source)
         if limit is not None and self._sent.get(source, 0) >= limit:
             del self.stall_after[source]
@@ -328,10 +329,11 @@ class FakePolarDevice:
             self._on_disconnect()
 
     def _lose(self) -> None:
+        """The link is gone: streams and subscriptions end; SDK mode stays (Polar: only a stop request
+        or switching the sensor off ends it)."""
         self.connected = False
         self.active.clear()
         self.subscriptions.clear()
-        self.sdk_mode = False  # SDK mode ends when the sensor restarts its session; kept simple here
         if self._release is not None:
             self._release.clear()
 

@@ -350,21 +350,21 @@ class PolarSession:
             ) from None
         self.data.reset_timing()
         self.channel.reset()
-        await self._read_mtu(client, streams, stop)
-        if self.capture is not None:
-            self.capture.note(
-                device={
-                    "name": advert.name,
-                    "address": advert.address,
-                    "id": device_id,
-                    "family": family.name,
-                },
-                mtu=self.mtu,
-                t=self.clock(),
-            )
         started: list[ActiveStream] = []
         watching: asyncio.Task[None] | None = None
         try:
+            await self._read_mtu(client, streams, stop)
+            if self.capture is not None:
+                self.capture.note(
+                    device={
+                        "name": advert.name,
+                        "address": advert.address,
+                        "id": device_id,
+                        "family": family.name,
+                    },
+                    mtu=self.mtu,
+                    t=self.clock(),
+                )
             self._set_state("starting")
             await self._start(client, streams, started, stop)
             self.connections += 1

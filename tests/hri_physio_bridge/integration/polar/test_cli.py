@@ -53,6 +53,10 @@ def test_no_bluetooth_is_one_line_and_status_2(args: list[str]) -> None:
         (["--device", "X", "--streams", "ecg,foo"], "streams"),
         (["--device", "X", "--ros-args", "-p", "ppg_rate:=60"], "ppg_rate"),
         (["--device", "X", "--backoff-initial", "40"], "backoff_initial"),
+        (["--device", "X", "--sdk-mode", "--streams", "ppg,hr"], "sdk_mode"),
+        (["--device", "X", "--stall-timeout", "0"], "stall_timeout"),
+        (["--device", "X", "--start-timeout", "-1"], "start_timeout"),
+        (["--replay", "x.jsonl", "--replay-speed", "2000"], "replay_speed"),
         ([], "device"),
         (["--replay", "/nonexistent/capture.jsonl"], "does not exist"),
     ],
@@ -114,6 +118,8 @@ def test_replay_a_capture_onto_lsl(tmp_path: Path) -> None:
             prefix,
             "--streams",
             "ecg,hr",
+            "--replay-speed",  # 3 s of capture played over 12 s: time for a busy machine to resolve it
+            "0.25",
             "--status-period",
             "0.5",
         ],
@@ -150,6 +156,8 @@ def test_sigterm_stops_cleanly_mid_stream() -> None:
         "hri_physio_bridge.nodes.polar_streamer",
         "--replay",
         str(CAPTURE),
+        "--replay-speed",  # 10 s of capture over 40 s: still streaming when a busy machine has resolved it
+        "0.25",
         "--name-prefix",
         prefix,
     ]

@@ -247,6 +247,16 @@ def test_sdk_mode_on_a_verity_sense() -> None:
     assert run.sink.streams["ppg"].nominal_rate == 176 and "hr" not in run.sink.streams  # SDK mode: no HR
 
 
+def test_sdk_mode_outlives_a_lost_link_and_is_asked_for_again() -> None:
+    clock = FakeClock()
+    device, rows = verity_ppg(clock, 20.0, rate=176.0, sdk_mode=True, sdk_settings={Measurement.PPG: SDK_PPG},
+                              disconnect_after=[10])
+    run = run_session([device], clock, device="2B3C4D5E", sdk_mode=True, ppg_rate=176)
+    assert device.connections == 2 and writes(device).count("0209") == 2  # ALREADY_IN_STATE the 2nd time
+    assert run.status == 0 and not device.sdk_mode  # switched off before the last disconnect
+    assert 10 * 42 < run.session.status()["streams"]["ppg"]["samples"] < len(rows)  # frames lost while down
+
+
 def test_sdk_mode_on_a_device_without_it_stops_with_status_2() -> None:
     clock = FakeClock()
     device, _ = h10(clock, 5.0)

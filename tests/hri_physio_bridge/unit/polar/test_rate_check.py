@@ -78,3 +78,11 @@ def test_too_few_pairs_leave_the_announced_rate() -> None:
 def test_the_announced_rate_must_be_positive() -> None:
     with pytest.raises(ValueError, match="must be > 0"):
         RateCheck(0.0)
+
+
+def test_the_announced_rate_stands_while_frames_are_off_by_less_than_a_quarter_sample() -> None:
+    """0.6 % off: nothing for frames of 10 samples (0.06 sample), a gap every frame for 73 (0.44)."""
+    short = verdict_of(RateCheck(100.0, known_rates=(100,)), frames(100.6, 10, 6))
+    assert not short.corrected
+    long = verdict_of(RateCheck(130.0, known_rates=(130,)), frames(130.78, 73, 6))
+    assert long.corrected and long.rate == pytest.approx(130.78, abs=0.01)  # 130 is too far for 73 samples
