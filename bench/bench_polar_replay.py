@@ -14,7 +14,11 @@ process (what a loaded machine cannot take away; LSL's own threads not counted),
 pushed out of those sent (a replay must push every notification it holds). The goal: >= 100x for
 a paced replay.
 
+``--capture FILE`` replays a capture of your own instead (``polar_streamer --capture``; its ECG is
+counted), e.g. one recorded from a real strap.
+
 Run:  source scripts/env.sh && python bench/bench_polar_replay.py [--minutes 30] [--speeds 100,1000]
+      [--capture FILE]
 """
 
 from __future__ import annotations
@@ -41,7 +45,7 @@ from hri_physio_bridge.polar.fake import (
 from hri_physio_bridge.polar.gatt import PMD_DATA
 from hri_physio_bridge.polar.lsl_output import LslSink
 from hri_physio_bridge.polar.output import MemorySink, Sink
-from hri_physio_bridge.polar.protocol import decode_pmd_frame
+from hri_physio_bridge.polar.protocol import Measurement, decode_pmd_frame
 from hri_physio_bridge.polar.session import PolarSession
 from hri_physio_bridge.polar.synthetic import synthetic_h10, write_capture
 from hri_physio_bridge.polar.virtual_time import run_virtual
@@ -85,21 +89,24 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=30.0, help="length of the capture (default 30)")
     parser.add_argument("--speeds", default="100,1000", help="paced replay speeds (default 100,1000)")
+    parser.add_argument("--capture", type=Path, help="replay this capture file instead of a synthetic one")
     args = parser.parse_args()
-    seconds = args.minutes * 60
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "ecg.jsonl"
-        syn = synthetic_h10(seconds, heart_rate=False, ppm=20.0, jitter_ms=6.0, seed=1)
-        write_capture(path, syn, name=f"Polar H10 {uuid.uuid4().hex[:8].upper()}")
-        capture = read_capture(path)
-    frames = [r.data for r in capture.records if r.op == "notify" and r.char == PMD_DATA]
-    sent = sum(len(f) - 10 for f in frames) // 3
-    span = len(syn.ecg_values) / 130.0
+    if args.capture is None:
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "ecg.jsonl"
+            syn = synthetic_h10(args.minutes * 60, heart_rate=False, ppm=20.0, jitter_ms=6.0, seed=1)
+            write_capture(path, syn, name=f"Polar H10 {uuid.uuid4().hex[:8].upper()}")
+            capture = read_capture(path)
+    else:
+        capture = read_capture(args.capture)
+    notifications = [r for r in capture.records if r.op == "notify" and r.char == PMD_DATA]
+    frames = [r.data for r in notifications if r.data[0] == Measurement.ECG]
+    span = notifications[-1].t - notifications[0].t
     lines: list[Line] = []
 
     with Timed() as timed:
-        decoded = sum(decode_pmd_frame(f).sample_count for f in frames)
-    lines.append(Line("decode only (decode_pmd_frame)", timed.wall, timed.cpu, decoded))
+        sent = sum(decode_pmd_frame(f).sample_count for f in frames)
+    lines.append(Line("decode only (decode_pmd_frame)", timed.wall, timed.cpu, sent))
 
     unpaced = (("session unpaced, memory sink", MemorySink), ("session unpaced, LSL outlets", lsl_sink))
     for label, make_sink in unpaced:
@@ -119,7 +126,8 @@ def main() -> None:
         lines.append(Line(f"session paced at {speed:g}x, LSL outlets", timed.wall, timed.cpu, pushed))
         sink.close()
 
-    print(f"capture: {args.minutes:g} min of 130-Hz H10 ECG, {len(frames)} notifications, {sent} samples")
+    what = args.capture or f"synthetic, {args.minutes:g} min of 130-Hz H10 ECG"
+    print(f"capture: {what}: {span / 60:.1f} min, {len(frames)} ECG notifications, {sent} samples")
     print(f"{'path':<38} {'wall s':>7} {'x real time':>11} {'CPU s':>6} {'x per CPU s':>11} "
           f"{'pushed':>8} {'of sent':>7}")
     for line in lines:
