@@ -171,3 +171,26 @@ def concat_new_samples(frames: list, frame_size: int, overlap: int) -> tuple[np.
         ts.append(f.timestamps[skip:])
         vs.append(f.values[skip:])
     return np.concatenate(ts), np.concatenate(vs)
+
+
+def resolve_lsl(name: str | None = None, timeout: float = 30.0, *, pred: str | None = None,
+                minimum: int = 1) -> list:
+    """The LSL streams named ``name`` (or matching the XPath predicate ``pred``), waited for until
+    ``minimum`` of them are seen or ``timeout`` has passed (then what was seen, maybe none).
+
+    A continuous resolver, polled, as the product resolves: liblsl's one-shot resolves
+    (``resolve_byprop``) can miss a stream for many seconds on a busy machine.
+    """
+    import pylsl
+
+    resolver = pylsl.ContinuousResolver(pred=pred if pred is not None else f"name='{name}'")
+    found: list = []
+
+    def appeared() -> bool:
+        found[:] = resolver.results()
+        return len(found) >= minimum
+
+    deadline = time.monotonic() + timeout
+    while not appeared() and time.monotonic() < deadline:
+        time.sleep(0.1)
+    return found

@@ -152,6 +152,10 @@ class ExerciseCoach(Listener):
         self._tempos = tuple(tempo_from_name(s) for s in self.ladder.suffixes)
         self._buffer_since = 0.0
         self._pending_rule: tuple[float, Timer] | None = None  # (rule time, its deadline timer)
+        #: A calibration waiting for its last heart rate: (end of the phase, its deadline timer).
+        self._pending_calibration: tuple[float, Timer] | None = None
+        #: The plan of a phase that started while the calibration before it still waited: (phase, start).
+        self._deferred_plan: tuple[Phase, float] | None = None
         self._noticed: set[str] = set()
         self._calls: dict[str, Callable[[ActionContext], None]] = {"calibrate": self._call_calibrate}
         hooks = {
@@ -187,7 +191,7 @@ class ExerciseCoach(Listener):
         now = self.clock() if now is None else float(now)
         if self.engine.running:
             self._check_hr_timeout(now)
-            self._check_pending_rule(now)
+            self._check_pending(now)
         self.engine.tick(now)
         if self.engine.running and self._gesture_next is not None and now >= self._gesture_next:
             assert self._gesture is not None  # set with _gesture_next
@@ -203,7 +207,7 @@ class ExerciseCoach(Listener):
         self.monitor.add(now, float(hr), flagged, source_t)
         if self.engine.running:
             self._check_hr_timeout(now)
-            self._check_pending_rule(now)
+            self._check_pending(now)
 
     def on_reply(self, reply: Mapping[str, Any]) -> None:
         """A reply of qt_controller; failures are logged as events and the session goes on."""
@@ -225,12 +229,15 @@ class ExerciseCoach(Listener):
         }
 
     def next_decision(self) -> float | None:
-        """The time of the next rule update not decided yet (one waiting for late heart rate first).
+        """The time of the next calibration or rule update not decided yet (one waiting for late heart
+        rate first).
 
         It is decided at that time, or up to ``hr_wait`` later once the heart rate taken before it has
         come; a launcher driving sim time reads it from /coach/state so as never to run the clock past
         that deadline before the coach, maybe slowed by a busy machine, has decided.
         """
+        if self._pending_calibration is not None:
+            return self._pending_calibration[0]
         if self._pending_rule is not None:
             return self._pending_rule[0]
         return self.engine.next_hook_due(RULE_UPDATE)
@@ -400,6 +407,9 @@ class ExerciseCoach(Listener):
             self._calibration_start = t
             self.monitor.start_calibration()
             return
+        if self._pending_calibration is not None:
+            self._deferred_plan = (phase, t)  # planned once the zone is known (within hr_wait)
+            return
         if self.zone is None:
             self._set_zone(self.cfg.resting_default, "default", "calibration skipped", 0, t)
         self._plan_phase(phase, t)
@@ -432,20 +442,41 @@ class ExerciseCoach(Listener):
         self._calibrate(ctx.t)
 
     def _calibrate(self, t: float) -> None:
+        """HR_rest from the heart rate taken in the phase, once the last of it has come.
+
+        As a rule update does: at once when every sample taken before ``t`` has arrived, else when it
+        has, ``hr_wait`` after ``t`` at the latest (the next phase starts meanwhile; its plan waits
+        for the zone).
+        """
+        self._calibrated_in_phase = True
+        if self.monitor.window_complete(t):
+            self._finish_calibration(t)
+            return
+        timer = self.engine.schedule(t + self.cfg.hr_wait, self._finish_pending_calibration,
+                                     "calibration: heart rate late")
+        self._pending_calibration = (t, timer)
+
+    def _finish_pending_calibration(self) -> None:
+        assert self._pending_calibration is not None  # scheduled with it
+        t, _ = self._pending_calibration
+        self._pending_calibration = None
+        self._finish_calibration(t)
+        if self._deferred_plan is not None:
+            phase, start = self._deferred_plan
+            self._deferred_plan = None
+            self._plan_late(phase, start)
+
+    def _finish_calibration(self, t: float) -> None:
         """HR_rest: the mean of the valid heart rate taken from ``calib_settle`` after the phase start (the
-        person has just sat down) until ``hr_wait`` before ``t`` (so every sample it averages has had
-        ``hr_wait`` to arrive and a slow transport does not change it); at most a quarter of the phase
-        is left out at the start and a tenth at the end."""
+        person has just sat down) until ``t``; at most a quarter of the phase is left out at the start."""
         duration = max(t - self._calibration_start, 0.0)
         start = self._calibration_start + min(self.cfg.calib_settle, 0.25 * duration)
-        end = t - min(self.cfg.hr_wait, 0.1 * duration)
-        samples = self.monitor.finish_calibration(start, end)
-        self._calibrated_in_phase = True
+        samples = self.monitor.finish_calibration(start, t)
         if len(samples) >= self.cfg.calib_min_samples:
             hr_rest = sum(samples) / len(samples)
             if hr_rest < self.hr_max:
                 self._set_zone(hr_rest, "measured", "mean HR over calibration", len(samples), t,
-                               window=(start, end))
+                               window=(start, t))
                 return
             reason = f"measured HR_rest {hr_rest:.1f} is not below HR_max {self.hr_max:.1f}"
         else:
@@ -515,8 +546,16 @@ class ExerciseCoach(Listener):
         timer = self.engine.schedule(deadline, self._decide_pending, "rule update: heart rate late")
         self._pending_rule = (t, timer)
 
-    def _check_pending_rule(self, now: float) -> None:
-        """The samples a waiting rule update needs have arrived (or stopped): decide at ``now``."""
+    def _check_pending(self, now: float) -> None:
+        """The samples a waiting calibration or rule update needs have arrived (or stopped): decide at
+        ``now``."""
+        waiting = self._pending_calibration
+        if waiting is not None and self.monitor.window_complete(waiting[0]):
+            t, timer = waiting
+            self.engine.cancel(timer)
+            at = min(max(now, self.engine.now), timer.time)
+            self._pending_calibration = (t, self.engine.schedule(at, self._finish_pending_calibration,
+                                                                 "calibration"))
         if self._pending_rule is None or not self.monitor.window_complete(self._pending_rule[0]):
             return
         t, timer = self._pending_rule
@@ -599,18 +638,38 @@ class ExerciseCoach(Listener):
 
     def _plan_phase(self, phase: Phase, t: float) -> None:
         """A policy that plans phases sets this one up before its first activity's actions run."""
-        if self.zone is None:
+        decision = self._plan(phase, t)
+        if decision is not None:
+            self._speak_decision(decision)  # the first activity's own actions carry the new pace
+
+    def _plan_late(self, phase: Phase, t: float) -> None:
+        """The plan of a phase whose first activity already runs (the calibration before it waited for
+        its last heart rate): applied as a rule update's decision is."""
+        if self.engine.phase is not phase:
+            return  # that phase is over already
+        decision = self._plan(phase, t)
+        if decision is None:
             return
+        switched = self._apply_level(decision)
+        if not switched:
+            self._speak_decision(decision)
+        if decision.changed:
+            self._resend_pace(f"plan: {decision.action}", gesture=not switched)
+            self.adapter.observe(self.engine.now, self._controls(self.engine.now))
+
+    def _plan(self, phase: Phase, t: float) -> Decision | None:
+        if self.zone is None:
+            return None
         hr = self.monitor.last_hr if self.monitor.last_hr is not None else self.zone.target
         decision = self.adapter.plan(RuleInput(
             t=t, hr=hr, zone=self.zone, phase=phase.kind, phase_start=t, phase_end=t + phase.duration,
             controls=self._controls(self._buffer_since)))
         if decision is None:
-            return
+            return None
         self.decisions.append(decision)
         self._emit({"event": "plan", "phase": phase.name, "decision": decision.as_dict(),
                     "ladder": self.ladder.state()})
-        self._speak_decision(decision)  # the first activity's own actions carry the new pace
+        return decision
 
     def _speaks_for_replaced_slot(self, action: Action, ctx: ActionContext) -> bool:
         """A slot's own lines ("Back to marching") are not said while another activity runs in it."""

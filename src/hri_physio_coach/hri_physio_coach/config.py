@@ -108,8 +108,9 @@ class CoachConfig(NodeConfig):
     # --- heart-rate input and signal gating ----------------------------------------------------
     hr_timeout: float = option(10.0, "time without HR before adaptation pauses (the routine goes on)",
                                unit="s", gt=0)
-    hr_wait: float = option(3.0, "longest a rule update waits for the heart rate taken before it to "
-                            "arrive (never past its activity's end; 0: decide on what has arrived)",
+    hr_wait: float = option(3.0, "longest the calibration or a rule update waits for the heart rate taken "
+                            "before it to arrive (a rule update never past its activity's end; 0: decide "
+                            "on what has arrived)",
                             unit="s", ge=0)
     hr_valid_min: float = option(30.0, "lowest plausible heart rate", unit="bpm", gt=0)
     hr_valid_max: float = option(230.0, "highest plausible heart rate", unit="bpm", gt=0)

@@ -15,7 +15,7 @@ import numpy as np
 import pylsl
 import pytest
 
-from helpers import wait_until
+from helpers import resolve_lsl, wait_until
 from hri_physio_bridge.receiver import PhysioReceiver, ReceiverConfig
 from hri_physio_bridge.streamers import OpenCancelled, StreamNotFoundError, numpy_dtype
 from hri_physio_bridge.streamers.lsl import LslStreamer
@@ -72,7 +72,7 @@ def test_every_channel_format_relayed_exactly(lsl_name: str, dtype: str, fmt: in
     got_rows: list = []
     got_stamps: list = []
     try:
-        infos = pylsl.resolve_byprop("name", relay, 1, 20)
+        infos = resolve_lsl(relay)
         assert infos, f"relay {relay} did not appear"
         assert infos[0].channel_format() == fmt
         inlet = pylsl.StreamInlet(infos[0], recover=False)

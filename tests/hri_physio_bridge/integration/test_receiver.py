@@ -16,7 +16,7 @@ import numpy as np
 import pylsl
 import pytest
 
-from helpers import NodeProcess, RosFrameCollector, concat_new_samples, wait_until
+from helpers import NodeProcess, RosFrameCollector, concat_new_samples, resolve_lsl, wait_until
 
 pytestmark = [pytest.mark.ros, pytest.mark.lsl]
 
@@ -110,7 +110,7 @@ def test_ros_to_lsl_every_sample_once_in_order(lsl_name: str, ros_context) -> No
         "--num-channels", "2", "--output-frame", "5", "--dtype", "int32",
     ) as rx:
         rx.wait_for_output("connected")
-        infos = pylsl.resolve_byprop("name", lsl_name, 1, 20)
+        infos = resolve_lsl(lsl_name)
         assert infos, rx.output
         assert infos[0].channel_format() == pylsl.cf_int32 and infos[0].type() == "ECG"
         inlet = pylsl.StreamInlet(infos[0])

@@ -10,7 +10,7 @@ import numpy as np
 import pylsl
 import pytest
 
-from helpers import NodeProcess
+from helpers import NodeProcess, resolve_lsl
 
 pytestmark = pytest.mark.lsl
 
@@ -43,7 +43,7 @@ def test_cli_streams_named_like_a_polar_strap_and_the_ramp_arrives_complete(lsl_
         "--device-id", "DEV42", "--name-prefix", lsl_name, "--chunk", "10", "--wait-for-consumers", "30",
     ) as sim:
         sim.wait_for_output("streaming", timeout=30)
-        found = pylsl.resolve_bypred(f"starts-with(name,'{lsl_name}/')", len(KINDS), 20)
+        found = resolve_lsl(pred=f"starts-with(name,'{lsl_name}/')", minimum=len(KINDS))
         by_name = {info.name(): info for info in found}
         assert sorted(by_name) == sorted(f"{lsl_name}/{kind}" for kind in KINDS.values()), sim.output
         inlets = {sig: pylsl.StreamInlet(by_name[f"{lsl_name}/{kind}"], max_buflen=60)
@@ -80,7 +80,7 @@ def test_cli_stops_cleanly_on_a_signal_in_continuous_mode(lsl_name: str, sig: si
     with NodeProcess("physio_simulator", "--continuous", "--signals", "ramp,hr", "--rate", "50",
                      "--name-prefix", lsl_name) as sim:
         sim.wait_for_output("until stopped", timeout=30)
-        found = pylsl.resolve_byprop("name", f"{lsl_name}/NeuroKitSim/SIM0001/RAMP", 1, 20)
+        found = resolve_lsl(f"{lsl_name}/NeuroKitSim/SIM0001/RAMP")
         assert found, sim.output
         inlet = pylsl.StreamInlet(found[0])
         inlet.open_stream(10)

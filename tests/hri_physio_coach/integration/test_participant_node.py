@@ -13,7 +13,7 @@ from typing import Any
 
 import pytest
 
-from helpers import NodeProcess, wait_until
+from helpers import NodeProcess, resolve_lsl, wait_until
 from hri_physio_bridge import topics
 
 pytestmark = [pytest.mark.ros, pytest.mark.lsl]
@@ -78,7 +78,6 @@ def test_help_lists_every_option() -> None:
 
 
 def test_the_participant_streams_on_lsl_and_follows_the_robot(ros_context: Any, lsl_name: str) -> None:
-    import pylsl
     from rclpy.node import Node
     from std_msgs.msg import String
 
@@ -100,7 +99,7 @@ def test_the_participant_streams_on_lsl_and_follows_the_robot(ros_context: Any, 
     try:
         with NodeProcess("simulated_participant", "--name-prefix", lsl_name, "--seed", "4") as person:
             person.wait_for_output("model started")
-            found = pylsl.resolve_byprop("name", f"{lsl_name}/PolarH10/SIM0001/HR", 1, 30.0)
+            found = resolve_lsl(f"{lsl_name}/PolarH10/SIM0001/HR")
             assert found, person.output
             assert (found[0].type(), found[0].nominal_srate()) == ("HR", 1.0)
             wait_until(lambda: states, 30, "the participant's state")

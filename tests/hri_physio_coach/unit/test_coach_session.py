@@ -113,9 +113,9 @@ def test_phases_and_activities(session: Session) -> None:
 def test_calibration_zone_and_announcement(session: Session) -> None:
     calib = session.of("calibration")
     assert len(calib) == 1 and calib[0]["t"] == WARM
-    # The heart rate taken from calib_settle (15 s) after the start until hr_wait (3 s) before the end.
-    assert calib[0]["source"] == "measured" and calib[0]["n_samples"] == 162
-    assert calib[0]["window"] == [15.0, WARM - 3.0]
+    # The heart rate taken from calib_settle (15 s) after the start until the end.
+    assert calib[0]["source"] == "measured" and calib[0]["n_samples"] == 165
+    assert calib[0]["window"] == [15.0, WARM]
     assert calib[0]["hr_rest"] == pytest.approx(85.4)
     zone = session.of("zone")[0]
     assert zone["hr_max"] == pytest.approx(184.9)

@@ -15,7 +15,7 @@ import numpy as np
 import pylsl
 import pytest
 
-from helpers import NodeProcess, wait_until
+from helpers import NodeProcess, resolve_lsl, wait_until
 from helpers.processing import Outputs, nk_direct_ecg, random_chunks
 from hri_physio_processing.features import HEART_SCALARS
 
@@ -205,7 +205,7 @@ def test_lsl_outputs(mitdb, ros_context, collector, lsl_name: str, tmp_path: Pat
                      "--lsl-output", "true", "--lsl-prefix", f"{lsl_name}/proc") as proc:
         wait_until(lambda: collector.node.count_subscribers(topic) > 0, 60,  # outputs open before the input
                    lambda: f"the processor's subscription:\n{proc.output}")
-        infos = pylsl.resolve_byprop("name", f"{lsl_name}/proc/hr", 1, 20)
+        infos = resolve_lsl(f"{lsl_name}/proc/hr")
         assert infos, proc.output
         inlet = pylsl.StreamInlet(infos[0])
         inlet.open_stream(10)

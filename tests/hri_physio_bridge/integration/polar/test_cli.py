@@ -14,7 +14,7 @@ from pathlib import Path
 import pylsl
 import pytest
 
-from helpers import DATA
+from helpers import DATA, resolve_lsl
 
 CAPTURE = DATA / "polar" / "synthetic_h10.jsonl"
 HAS_SYSTEM_BUS = (
@@ -129,7 +129,7 @@ def test_replay_a_capture_onto_lsl(tmp_path: Path) -> None:
         env=dict(os.environ),
     )
     try:
-        found = pylsl.resolve_byprop("name", f"{prefix}/PolarH10/0A1B2C3D/ECG", timeout=20)
+        found = resolve_lsl(f"{prefix}/PolarH10/0A1B2C3D/ECG")
         assert found, "the replayed ECG stream did not appear"
         inlet = pylsl.StreamInlet(found[0])
         samples, stamps = [], []
@@ -165,7 +165,7 @@ def test_sigterm_stops_cleanly_mid_stream() -> None:
         command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=dict(os.environ)
     )
     try:
-        assert pylsl.resolve_byprop("name", f"{prefix}/PolarH10/0A1B2C3D/ECG", timeout=20), "no stream"
+        assert resolve_lsl(f"{prefix}/PolarH10/0A1B2C3D/ECG"), "no stream"
         proc.send_signal(signal.SIGTERM)
         out = proc.communicate(timeout=30)[0]
     finally:

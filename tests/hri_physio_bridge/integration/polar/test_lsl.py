@@ -9,7 +9,7 @@ import uuid
 import pylsl
 import pytest
 
-from helpers import wait_until
+from helpers import resolve_lsl, wait_until
 from helpers.polar import SessionThread
 from hri_physio_bridge.polar import control_point as cp
 from hri_physio_bridge.polar.config import PolarConfig
@@ -64,7 +64,7 @@ def test_lsl_streams_names_rates_and_every_sample_in_order() -> None:
     with SessionThread(session) as runner:
         inlets = {}
         for kind in ("ECG", "HR", "RR", "Markers"):
-            found = pylsl.resolve_byprop("name", f"PolarH10/{device_id}/{kind}", timeout=15)
+            found = resolve_lsl(f"PolarH10/{device_id}/{kind}")
             assert found, f"no LSL stream PolarH10/{device_id}/{kind}"
             inlets[kind] = pylsl.StreamInlet(found[0], max_buflen=60)
             inlets[kind].open_stream(timeout=10)
@@ -128,7 +128,7 @@ def test_a_corrected_rate_is_declared_anew_and_its_consumer_gets_every_sample() 
     session.data.reopen_wait_s = 300.0  # this test's consumer may be slow to find the new outlet
     name = f"PolarOH1/{device_id}/PPG"
     with SessionThread(session) as runner:
-        [first] = pylsl.resolve_byprop("name", name, timeout=15)
+        [first] = resolve_lsl(name)
         assert first.nominal_srate() == 135.0  # what the device announced
         old = pylsl.StreamInlet(first)
         old.open_stream(timeout=10)
