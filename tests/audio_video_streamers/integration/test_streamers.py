@@ -35,7 +35,7 @@ class MediaProbe:
         from sensor_msgs.msg import CompressedImage
         from std_msgs.msg import String
 
-        from hri_physio_bridge.qos import command_qos, event_qos
+        from hri_physio_bridge.qos import event_qos, media_request_qos
 
         self._string = String
         self.node = Node("media_probe", context=context)
@@ -43,8 +43,8 @@ class MediaProbe:
         self.audio: list[dict] = []
         self.video: list[dict] = []
         self.previews: list[tuple[float, np.ndarray]] = []
-        self.audio_pub = self.node.create_publisher(String, topics.AUDIO_REQUEST, command_qos())
-        self.video_pub = self.node.create_publisher(String, topics.VIDEO_REQUEST, command_qos())
+        self.audio_pub = self.node.create_publisher(String, topics.AUDIO_REQUEST, media_request_qos())
+        self.video_pub = self.node.create_publisher(String, topics.VIDEO_REQUEST, media_request_qos())
         for topic, into in ((topics.AUDIO_STATUS, self.audio), (topics.VIDEO_STATUS, self.video)):
             self.node.create_subscription(String, topic, lambda m, into=into: self._add(into, m), event_qos())
         self.node.create_subscription(CompressedImage, topics.VIDEO_PREVIEW, self._on_preview, 10)
@@ -124,9 +124,9 @@ def test_streamers_play_what_is_requested_and_report_it(ros_context: Any, tmp_pa
             with probe.lock:
                 (t0, first), (_, second) = probe.previews[1], probe.previews[2]
                 t5 = probe.previews[5][0]
-            # 2 Hz on the node's clock: each preview is the frame nearest its due time (half a frame
-            # either side) and a busy machine may stamp one late, so the rate is checked over 4 intervals.
-            assert first.shape == (240, 320, 3) and (t5 - t0) / 4 >= 0.45, (t0, t5)
+            # 2 Hz on the node's clock, never faster: a busy machine may stamp a preview late (and
+            # the next ones catch up), so the rate is checked over 4 intervals with room for that.
+            assert first.shape == (240, 320, 3) and 4 / (t5 - t0) <= 2.0 * 1.25, (t0, t5)
             assert (green_mask(first) != green_mask(second)).sum() > 100
             probe.wait_video("the splash offscreen",
                              lambda s: s.get("source") == "splash" and s["display"] == "offscreen")
@@ -225,3 +225,27 @@ def test_a_window_without_a_display_is_a_startup_error() -> None:
     p = subprocess.run([str(BIN / "video_streamer"), "--display", "window"], capture_output=True, text=True,
                        timeout=60, env=env, stdin=subprocess.DEVNULL)
     assert p.returncode == 2 and "no display server" in p.stderr and len(p.stderr.strip().splitlines()) == 1
+
+
+def test_a_restarted_streamer_plays_the_last_request_once(ros_context: Any, tmp_path: Path) -> None:
+    """The request topic is latched: a streamer that restarts (kill -9) gets what it should play."""
+    probe = MediaProbe(ros_context)
+    options = ("--sink", "null", "--cache-dir", str(tmp_path / "cache"), "--fade", "0")
+    try:
+        with NodeProcess("audio_streamer", *options) as first:
+            wait_until(lambda: probe.node.count_subscribers(topics.AUDIO_REQUEST) >= 1, 60,
+                       lambda: f"the streamer's request subscription\n{first.output}")
+            probe.send_audio("beat:100")
+            probe.send_audio("beat:96")  # the last request is what a restarted streamer gets
+            probe.wait_audio("beat:96 playing",
+                             lambda s: s["state"] == "playing" and s.get("source") == "beat:96", timeout=60)
+            first.proc.kill()
+            first.proc.wait()
+        with NodeProcess("audio_streamer", *options) as second:
+            # A status of the new process: one request received (the latched one), not the two sent.
+            again = probe.wait_audio("beat:96 playing in the restarted streamer",
+                                     lambda s: s["requests"]["received"] == 1 and s["state"] == "playing",
+                                     timeout=60)
+            assert again["source"] == "beat:96", second.output
+    finally:
+        probe.close()
