@@ -88,6 +88,12 @@ class SessionPlan:
     def node(self, name: str) -> NodeLaunch:
         return next(n for n in self.nodes if n.name == name)
 
+    @property
+    def receivers(self) -> dict[str, tuple[str, float]]:
+        """Each receiver's ROS output topic and sampling rate, by node name."""
+        return {n.name: (n.config.output.removeprefix("ros:"), float(n.config.sampling_rate))
+                for n in self.nodes if isinstance(n.config, ReceiverConfig)}
+
 
 def coach_config(options: SessionConfig) -> CoachNodeConfig:
     """The coach's configuration: its YAML (or the packaged one) < what the session sets."""
@@ -232,7 +238,8 @@ def plan_session(options: SessionConfig, folder: SessionFolder, device_id: str,
         # The recorder subscribes to a topic once it discovers it: the session starts only once it records
         # the topics whose first messages matter (the coach's session_start, the first commands).
         capture = f"{RECORDER}_capture"
-        recorded = [topics.COACH_EVENTS, topics.COACH_STATE, topics.QT_COMMANDS, topics.AUDIO_STATUS]
+        recorded = [topics.COACH_EVENTS, topics.COACH_STATE, topics.QT_COMMANDS, topics.AUDIO_STATUS,
+                    topics.SESSION_EVENTS]
         if not options.polar:
             recorded.append(topics.PARTICIPANT_STATE)
         listeners += [(topic, capture) for topic in recorded]

@@ -210,12 +210,20 @@ def test_ecg_frames_carry_a_tenth_of_a_wall_second_at_any_speed(tmp_path: Path, 
     assert p.node(HR_RECEIVER).config.output_frame == 1
 
 
+@pytest.mark.parametrize(("value", "message"), [(-1, "max_restarts: expected greater than or equal to 0"),
+                                                (101, "max_restarts: expected less than or equal to 100")])
+def test_the_restart_limit_is_checked(value: int, message: str) -> None:
+    assert SessionConfig.from_mapping({}, "command line").max_restarts == 3
+    with pytest.raises(ConfigError, match=message):
+        SessionConfig.from_mapping({"max_restarts": value}, "command line")
+
+
 def test_the_session_starts_once_the_recorder_records_what_its_first_messages_need(tmp_path: Path) -> None:
     from hri_physio_bridge import topics
 
     p, _ = plan(tmp_path)
     capture = {topic for topic, node in p.listeners if node == "physio_recorder_capture"}
     assert capture == {topics.COACH_EVENTS, topics.COACH_STATE, topics.QT_COMMANDS, topics.AUDIO_STATUS,
-                       topics.PARTICIPANT_STATE}
+                       topics.PARTICIPANT_STATE, topics.SESSION_EVENTS}
     p, _ = plan(tmp_path, no_record=True)
     assert all(node != "physio_recorder_capture" for _topic, node in p.listeners)
