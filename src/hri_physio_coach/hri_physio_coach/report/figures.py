@@ -95,8 +95,8 @@ def _session_marks(ax, timeline: Timeline, t0: float) -> list:
         ax.axvspan(_minutes(t - down, t0), _minutes(t, t0), color=RESTART_COLOR, alpha=0.35, lw=0,
                    zorder=0.6)
         ax.axvline(_minutes(t, t0), color=RESTART_COLOR, lw=0.9, ls="-.", zorder=2)
-        ax.annotate(str(ev.get("node")), (_minutes(t, t0), 1.0), xycoords=("data", "axes fraction"),
-                    rotation=90, va="top", ha="right", fontsize=6.5, color=RESTART_COLOR)
+        ax.annotate(str(ev.get("node")), (_minutes(t, t0), 0.01), xycoords=("data", "axes fraction"),
+                    rotation=90, va="bottom", ha="right", fontsize=6.5, color=RESTART_COLOR)
     if restarts:
         handles.append(Line2D([], [], color=RESTART_COLOR, ls="-.",
                               label=f"Node restarted ({len(restarts)})"))
