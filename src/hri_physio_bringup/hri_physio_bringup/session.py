@@ -74,7 +74,7 @@ from hri_physio_bringup.plan import (
     coach_config,
     plan_session,
 )
-from hri_physio_bringup.supervision import Loss, Restart, Supervisor, status_text
+from hri_physio_bringup.supervision import Loss, Restart, Supervisor, gap_line, status_text
 from hri_physio_bringup.view import SessionView, overdue, session_counts, summary
 
 #: Session seconds past the routine's end after which a coach that has not ended is stopped.
@@ -372,7 +372,9 @@ class Supervision:
         with self.watcher.lock:
             closed, self.watcher.closed_gaps = self.watcher.closed_gaps, []
         for record in closed:
-            self.watcher.publish_event(record.gap_event(self.rates.get(record.node)))
+            event = record.gap_event(self.rates.get(record.node))
+            self.watcher.publish_event(event)
+            self.console.say(gap_line(event))
         return False
 
     def report(self) -> None:

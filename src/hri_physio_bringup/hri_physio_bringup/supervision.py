@@ -103,6 +103,13 @@ class Restart:
                 f"status {status_text(self.exit_status)}, down {self.down_s:g} s of session time")
 
 
+def gap_line(event: dict[str, Any]) -> str:
+    """The console line of a ``receiver_gap`` event: what the restarted receiver's source sent meanwhile."""
+    lost = "an unknown number of" if event["missing"] is None else str(event["missing"])
+    return (f"[session] {event['node']} publishes again: {lost} sample(s) of its source were lost while it "
+            f"was down (source time {event['last_before']:.3f} .. {event['first_after']:.3f})")
+
+
 @dataclass(frozen=True)
 class Loss:
     """A node whose death ends the session: essential, or past its restart limit."""

@@ -14,6 +14,7 @@ from hri_physio_bringup.supervision import (
     Loss,
     Restart,
     Supervisor,
+    gap_line,
     status_text,
 )
 
@@ -108,6 +109,10 @@ def test_a_receivers_gap_runs_from_its_last_sample_before_the_restart_to_its_fir
     assert closed is record and record.gap == (12.0, 19.0)
     assert record.gap_event(1.0) == {"t": 60.0, "event": RECEIVER_GAP, "node": HR_RECEIVER, "restart": 1,
                                      "last_before": 12.0, "first_after": 19.0, "missing": 6}
+    assert gap_line(record.gap_event(1.0)) == ("[session] hr_receiver publishes again: 6 sample(s) of its "
+                                               "source were lost while it was down (source time "
+                                               "12.000 .. 19.000)")
+    assert "an unknown number of sample(s)" in gap_line(record.gap_event(None))
     assert sup.output(HR_RECEIVER, [21.0]) is None  # closed once
     assert record.record()["gap"] == {"last_before": 12.0, "first_after": 19.0}
 
