@@ -288,6 +288,7 @@ class Outcome:
     #: Every restart of a node (Restart.record) and the loss that ended the session (Loss.event), if any.
     restarts: list[dict[str, Any]] = field(default_factory=list)
     lost: dict[str, Any] | None = None
+    awaiting_restart: list[str] = field(default_factory=list)  # dead, their backoff not over at the end
 
     def fail(self, problem: str, code: int = 1) -> None:
         if self.problem is None:
@@ -382,6 +383,7 @@ class Supervision:
             self.out.restarts = [r.record() for r in self.supervisor.records]
         loss = self.supervisor.loss
         self.out.lost = None if loss is None else loss.event()
+        self.out.awaiting_restart = self.supervisor.awaiting_restart()
 
 
 def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder, console: SessionConsole,
@@ -598,7 +600,8 @@ def _run(options: SessionConfig, plan: SessionPlan, folder: SessionFolder, claim
         console.say(summary(view, out.wall, str(bag) if bag else None, now=now))
         if out.restarts:
             console.say(restarts_text(out.restarts))
-        bad = {name: c for name, c in out.node_codes.items() if c != 0}
+        # A node that died and was waiting for its restart when the session ended is in out.restarts.
+        bad = {name: c for name, c in out.node_codes.items() if c != 0 and name not in out.awaiting_restart}
         if bad and out.code == 0:
             out.fail(f"node exit statuses {bad}")
         if not stop.is_set() and view.ended_at is None and out.code == 0:

@@ -163,6 +163,10 @@ class Supervisor:
         """Dead and waiting for its restart (its old process is expected to have exited)."""
         return node in self._due
 
+    def awaiting_restart(self) -> list[str]:
+        """The nodes that died and wait for their restart (at the session's end: never restarted)."""
+        return sorted(self._due)
+
     def died(self, node: str, exit_status: int, sim_t: float, last_words: str = "") -> Restart | Loss:
         """``node`` found gone at sim time ``sim_t``: a restart planned, or the loss ending the session."""
         done = self.restarts_of(node)

@@ -40,11 +40,13 @@ def test_a_restartable_node_is_restarted_after_its_backoff_and_the_record_says_h
     sup = Supervisor(max_restarts=3, monotonic=clock)
     record = sup.died(CONTROLLER, -9, sim_t=1000.0)
     assert isinstance(record, Restart) and sup.pending(CONTROLLER)
+    assert sup.awaiting_restart() == [CONTROLLER] and record.record()["restarted_t"] is None
     assert sup.due() == []
     clock.now += 0.49
     assert sup.due() == []
     clock.now += 0.02
     assert sup.due() == [record] and sup.due() == [] and not sup.pending(CONTROLLER)
+    assert sup.awaiting_restart() == []
     sup.started(record, sim_t=1007.5)
     assert record.event() == {"t": 1007.5, "event": NODE_RESTARTED, "node": CONTROLLER, "exit_status": -9,
                               "down_s": 7.5, "restart": 1}
