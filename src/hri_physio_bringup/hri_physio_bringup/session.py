@@ -22,6 +22,10 @@ coach's input, sends ``start`` to the coach, shows one live progress display (pl
 the output is not a terminal; every node line with ``--verbose``), and when the coach ends the
 session stops every process cleanly (the recorder last), prints a summary and the folder.
 
+A node that dies mid-session is restarted or ends the session (:mod:`hri_physio_bringup.supervision`:
+restartable and essential nodes, backoff, ``--max-restarts``); each restart is said on the console,
+published on ``/session/events`` (recorded) and listed in ``summary.json`` and the report.
+
 ``--source polar:<device id>`` puts a real Polar H10 in the simulated participant's place
 (``polar_streamer``; real time only), ``--source polar-replay:<capture>`` a capture of one.
 """
