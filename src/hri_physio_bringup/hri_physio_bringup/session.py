@@ -371,7 +371,8 @@ class Supervision:
             self.group.restart(old, f"[session] --- {record.node} died with exit status "
                                f"{status_text(record.exit_status)}: restart {record.restart} of "
                                f"{sup.max_restarts}, same command line; its output continues here ---")
-            sup.started(record, sim_t)
+            with self.watcher.lock:  # the receivers' output callbacks read the gap state
+                sup.started(record, sim_t)
             self.watcher.publish_event(record.event())
             self.console.say(record.line(sup.max_restarts))
         with self.watcher.lock:
