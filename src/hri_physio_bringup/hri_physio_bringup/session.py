@@ -78,7 +78,7 @@ from hri_physio_bringup.plan import (
     coach_config,
     plan_session,
 )
-from hri_physio_bringup.supervision import Loss, Restart, Supervisor, gap_line, status_text
+from hri_physio_bringup.supervision import Loss, Restart, Supervisor, gap_line, restarts_text, status_text
 from hri_physio_bringup.view import SessionView, overdue, session_counts, summary
 
 #: Session seconds past the routine's end after which a coach that has not ended is stopped.
@@ -379,6 +379,7 @@ class Supervision:
             closed, self.watcher.closed_gaps = self.watcher.closed_gaps, []
         for record in closed:
             event = record.gap_event(self.rates.get(record.node))
+            record.missing = event["missing"]
             self.watcher.publish_event(event)
             self.console.say(gap_line(event))
         return False
@@ -458,13 +459,6 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
                 causes = ", ".join(f"{cause} {n}" for cause, n in sorted(guard.holds.items()))
                 console.say(f"[session] the clock waited {clock.held_wall:.1f} s of wall time for the loop "
                             f"(holds: {causes}): the machine was busy; what ran is as at full speed")
-
-
-def restarts_text(restarts: list[dict[str, Any]]) -> str:
-    """The closing line about restarts: which node, how often, how long it was down."""
-    parts = [f"{r['node']} after exit status {status_text(r['exit_status'])} (down "
-             + ("-" if r["down_s"] is None else f"{r['down_s']:g}") + " s)" for r in restarts]
-    return f"[session] {len(restarts)} node restart(s): {', '.join(parts)}"
 
 
 def _write_report(folder: SessionFolder) -> list[str]:

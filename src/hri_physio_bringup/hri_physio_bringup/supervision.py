@@ -74,6 +74,7 @@ class Restart:
     t: float | None = None  # sim time it was started again (None: still waiting for its backoff)
     #: A receiver's missing samples: (last source timestamp before, first after) its restart.
     gap: tuple[float, float] | None = None
+    missing: int | None = None  # how many samples that gap held (its gap_event's count, once published)
 
     @property
     def down_s(self) -> float | None:
@@ -96,7 +97,8 @@ class Restart:
         """The entry of summary.json's ``restarts``."""
         return {"node": self.node, "restart": self.restart, "exit_status": self.exit_status,
                 "died_t": self.died_t, "restarted_t": self.t, "down_s": self.down_s,
-                "gap": None if self.gap is None else {"last_before": self.gap[0], "first_after": self.gap[1]}}
+                "gap": None if self.gap is None else {"last_before": self.gap[0], "first_after": self.gap[1],
+                                                      "missing": self.missing}}
 
     def line(self, max_restarts: int) -> str:
         return (f"[session] restarted {self.node} ({self.restart} of {max_restarts}): it died with exit "
@@ -108,6 +110,17 @@ def gap_line(event: dict[str, Any]) -> str:
     lost = "an unknown number of" if event["missing"] is None else str(event["missing"])
     return (f"[session] {event['node']} publishes again: {lost} sample(s) of its source were lost while it "
             f"was down (source time {event['last_before']:.3f} .. {event['first_after']:.3f})")
+
+
+def restarts_text(restarts: list[dict[str, Any]]) -> str:
+    """The closing line about restarts: which node, how often, how long it was down."""
+    parts = []
+    for r in restarts:
+        down = "not restarted before the end" if r["down_s"] is None else f"down {r['down_s']:g} s"
+        lost = r["gap"]["missing"] if r["gap"] else None
+        parts.append(f"{r['node']} after exit status {status_text(r['exit_status'])} ({down}"
+                     + ("" if lost is None else f", {lost} sample(s) of its source lost") + ")")
+    return f"[session] nodes that died and their restarts ({len(restarts)}): {', '.join(parts)}"
 
 
 @dataclass(frozen=True)

@@ -134,7 +134,8 @@ def test_every_restartable_node_killed_once_is_restarted_and_only_the_gaps_lose_
     for node, (topic, rate) in RECEIVERS.items():
         (gap,) = [e for e in events if e["event"] == "receiver_gap" and e["node"] == node]
         (record,) = [r for r in restarts if r["node"] == node]
-        assert record["gap"] == {"last_before": gap["last_before"], "first_after": gap["first_after"]}
+        assert record["gap"] == {"last_before": gap["last_before"], "first_after": gap["first_after"],
+                                 "missing": gap["missing"]}
         stamps = np.concatenate(bag[topic])
         lost = check_counter(stamps, rate, [(gap["last_before"], gap["first_after"])])
         assert lost == gap["missing"], (plan, node, lost, gap)  # the bag misses what the gap says, no less

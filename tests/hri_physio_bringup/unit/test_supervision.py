@@ -15,6 +15,7 @@ from hri_physio_bringup.supervision import (
     Restart,
     Supervisor,
     gap_line,
+    restarts_text,
     status_text,
 )
 
@@ -116,7 +117,8 @@ def test_a_receivers_gap_runs_from_its_last_sample_before_the_restart_to_its_fir
                                                "12.000 .. 19.000)")
     assert "an unknown number of sample(s)" in gap_line(record.gap_event(None))
     assert sup.output(HR_RECEIVER, [21.0]) is None  # closed once
-    assert record.record()["gap"] == {"last_before": 12.0, "first_after": 19.0}
+    record.missing = 6
+    assert record.record()["gap"] == {"last_before": 12.0, "first_after": 19.0, "missing": 6}
 
 
 def test_a_receiver_restarted_twice_before_it_published_has_one_gap_on_its_last_restart() -> None:
@@ -145,3 +147,23 @@ def test_a_receiver_that_never_published_before_its_restart_has_no_gap_to_tell()
 
 def test_exit_statuses_in_words() -> None:
     assert status_text(-9) == "-9 (SIGKILL)" and status_text(1) == "1" and status_text(-200) == "-200"
+
+
+def test_the_closing_line_names_each_restart_its_downtime_and_what_a_receiver_lost() -> None:
+    clock = FakeClock()
+    sup = Supervisor(monotonic=clock)
+    sup.track(HR_RECEIVER)
+    sup.output(HR_RECEIVER, [1.0])
+    sup.died(HR_RECEIVER, -9, sim_t=10.0)
+    sup.died(CONTROLLER, 1, sim_t=11.0)
+    clock.now += 0.5
+    for record in sup.due():
+        sup.started(record, sim_t=record.died_t + 2)
+    closed = sup.output(HR_RECEIVER, [5.0])
+    assert closed is not None
+    closed.missing = closed.gap_event(1.0)["missing"]
+    sup.died(CONTROLLER, -11, sim_t=20.0)  # waiting for its second restart when the session ends
+    assert restarts_text([r.record() for r in sup.records]) == (
+        "[session] nodes that died and their restarts (3): hr_receiver after exit status -9 (SIGKILL) "
+        "(down 2 s, 3 sample(s) of its source lost), qt_controller after exit status 1 (down 2 s), "
+        "qt_controller after exit status -11 (SIGSEGV) (not restarted before the end)")
