@@ -118,7 +118,9 @@ def test_every_restartable_node_killed_once_is_restarted_and_only_the_gaps_lose_
     assert summary["outcome"] == "finished" and summary["node_lost"] is None, plan
     restarts = summary["restarts"]
     assert sorted(r["node"] for r in restarts) == sorted(RESTARTABLE), plan
-    assert all(r["exit_status"] == -9 and r["restart"] == 1 and r["down_s"] > 0 for r in restarts), restarts
+    # down_s is session time: a clock held for the loop may stand still while a node restarts.
+    assert all(r["exit_status"] == -9 and r["restart"] == 1 and r["restarted_t"] >= r["died_t"]
+               for r in restarts), restarts
     assert all(summary["nodes"][n]["restarts"] == 1 and summary["nodes"][n]["exit_status"] == 0
                for n in RESTARTABLE), summary["nodes"]
     for node in RESTARTABLE:
