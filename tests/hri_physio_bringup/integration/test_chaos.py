@@ -143,30 +143,34 @@ def test_every_restartable_node_killed_once_is_restarted_and_only_the_gaps_lose_
         assert lost == gap["missing"], (plan, node, lost, gap)  # the bag misses what the gap says, no less
 
 
-def test_the_loss_of_the_coach_ends_the_session_with_one_error_line_and_a_bag(
-        short_session: list[str]) -> None:
-    with NodeProcess("hri_physio_session", *short_session, "--speed", "10", "--no-ecg",
+@pytest.mark.parametrize(("node", "options", "why", "reason"), [
+    ("qt_physio_coach", [], "an essential node: the session cannot go on without it", "essential"),
+    ("qt_controller", ["--max-restarts", "0"], "after 0 restart(s), the limit (--max-restarts 0)",
+     "restart limit"),
+])
+def test_a_lost_node_ends_the_session_with_one_error_line_and_a_complete_bag(
+        short_session: list[str], node: str, options: list[str], why: str, reason: str) -> None:
+    with NodeProcess("hri_physio_session", *short_session, "--speed", "10", "--no-ecg", *options,
                      env=session_env()) as session:
         session.wait_for_output("[session] 00:00/04:30 calibration", timeout=180)  # the routine runs
-        os.kill(node_pid(session.proc.pid, "qt_physio_coach"), signal.SIGKILL)
+        os.kill(node_pid(session.proc.pid, node), signal.SIGKILL)
         code = session.wait(300)
     out = session.output
     assert code == 1, out
     errors = [line for line in out.splitlines() if line.startswith("hri_physio_session: error:")]
-    assert errors == ["hri_physio_session: error: qt_physio_coach died with exit status -9 (SIGKILL), an "
-                      "essential node: the session cannot go on without it"], out
+    assert errors == [f"hri_physio_session: error: {node} died with exit status -9 (SIGKILL), {why}"], out
     assert "Traceback" not in out
     folder = session_folder(out)
     summary = json.loads((folder / "summary.json").read_text())
-    assert summary["outcome"] == "failed" and summary["exit_status"] == 1
-    assert summary["node_lost"]["node"] == "qt_physio_coach" and summary["node_lost"]["reason"] == "essential"
+    assert summary["outcome"] == "failed" and summary["exit_status"] == 1 and summary["restarts"] == []
+    assert summary["node_lost"]["node"] == node and summary["node_lost"]["reason"] == reason
     assert summary["problem"] == errors[0].removeprefix("hri_physio_session: error: ")
     # Everything else stopped cleanly: the recorder closed its bag, which opens and holds the loss.
-    others = {name: node["exit_status"] for name, node in summary["nodes"].items()
-              if name != "qt_physio_coach"}
+    others = {name: n["exit_status"] for name, n in summary["nodes"].items() if name != node}
     assert set(others.values()) == {0}, others
     (lost,) = bag_messages(folder / "bag")[topics.SESSION_EVENTS]
-    assert (lost["event"], lost["node"], lost["exit_status"]) == ("node_died", "qt_physio_coach", -9)
+    assert (lost["event"], lost["node"], lost["exit_status"]) == ("node_died", node, -9)
+    assert lost["reason"] == reason
     report = json.loads((folder / "report.json").read_text())
     assert report["bag_complete"] is True
     assert [e["event"] for e in report["session_events"]] == ["node_died"]
