@@ -6,7 +6,8 @@ started by this launcher (on a full ROS 2 install the same nodes also run with
 grace period, so nodes can flush their logs and bags; a node that hangs on its way out prints every
 thread's stack on SIGABRT (``run_node`` enables :mod:`faulthandler`) before it dies, so its log
 shows where it was stuck. Each process's whole output can go
-to a log file of its own (``log_path``), whatever is echoed to the console.
+to a log file of its own (``log_path``), whatever is echoed to the console. A process that died
+can be started again in its place (:meth:`ProcessGroup.restart`), appending to its log.
 """
 
 from __future__ import annotations
@@ -62,6 +63,8 @@ class ManagedProcess:
     reader: threading.Thread
     lines: list[str] = field(default_factory=list)
     log_path: Path | None = None
+    env: dict[str, str] | None = None  # as given to start(): a restart gets the same
+    echo: bool = True
 
     @property
     def returncode(self) -> int | None:
@@ -94,17 +97,36 @@ class ProcessGroup:
         """Start ``script`` as ``name``; its output (stdout and stderr) is kept, echoed if ``echo``,
         passed to ``on_line`` and written whole to ``log_path`` (created or truncated) if given."""
         argv = [find_executable(script), *args]
-        log = open(log_path, "w", encoding="utf-8") if log_path is not None else None  # noqa: SIM115
+        env = dict(os.environ) if env is None else env  # kept as it is now: a restart gets the same
+        managed = self._launch(name, argv, env, echo, log_path, "w", None)
+        self.procs.append(managed)
+        return managed
+
+    def restart(self, old: ManagedProcess, note: str) -> ManagedProcess:
+        """Start ``old``'s command again (same argv, environment, echo), in its place in the group; its
+        log file is appended to, after the line ``note``. ``old`` must have exited."""
+        if old.returncode is None:
+            raise RuntimeError(f"{old.name} is still running: it cannot be restarted")
+        old.reader.join(2.0)  # its last lines reach the log before the note
+        managed = self._launch(old.name, old.argv, old.env, old.echo, old.log_path, "a", note)
+        self.procs[self.procs.index(old)] = managed
+        return managed
+
+    def _launch(self, name: str, argv: list[str], env: dict[str, str] | None, echo: bool,
+                log_path: Path | None, mode: str, note: str | None) -> ManagedProcess:
+        log = open(log_path, mode, encoding="utf-8") if log_path is not None else None  # noqa: SIM115
         try:
+            if log is not None and note is not None:
+                log.write(note + "\n")
+                log.flush()
             proc = self._popen(argv, env)
         except BaseException:
             if log is not None:
                 log.close()
             raise
-        managed = ManagedProcess(name, argv, proc, threading.Thread(), log_path=log_path)
+        managed = ManagedProcess(name, argv, proc, threading.Thread(), log_path=log_path, env=env, echo=echo)
         managed.reader = threading.Thread(target=self._pump, args=(managed, echo, log), daemon=True)
         managed.reader.start()
-        self.procs.append(managed)
         return managed
 
     @staticmethod

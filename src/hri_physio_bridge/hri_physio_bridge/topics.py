@@ -46,3 +46,7 @@ COACH_EVENTS = "/coach/events"
 COACH_STATE = "/coach/state"
 COACH_CONTROL = "/coach/control"
 PARTICIPANT_STATE = "/participant/state"
+
+# --- the session launcher ---------------------------------------------------------------------------
+#: Supervision events (JSON): a node restarted, a receiver's gap, a node whose loss ended the session.
+SESSION_EVENTS = "/session/events"

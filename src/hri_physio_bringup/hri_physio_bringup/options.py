@@ -50,6 +50,11 @@ class SessionConfig(NodeConfig):
                                    "terminal", unit="s", gt=0)
     verbose: bool = option(False, "every node's output on the console, interleaved (it always goes to "
                            "the folder's logs/)", switch=True)
+    max_restarts: int = option(3, "restarts of one restartable node (robot side, streamers, receivers, "
+                               "processor) after it died, each after a backoff (0.5 s doubling to 8 s); one "
+                               "more death ends the session (0: any node's death ends it). The coach, the "
+                               "recorder and the strap are never restarted: their loss ends the session",
+                               ge=0, le=100)
     no_report: bool = option(False, "do not write the report at the end (hri_physio_report can later)",
                              switch=True)
     source: str = option(SIMULATED, "where heart rate comes from: simulated (the simulated participant), "

@@ -88,6 +88,12 @@ class SessionPlan:
     def node(self, name: str) -> NodeLaunch:
         return next(n for n in self.nodes if n.name == name)
 
+    @property
+    def receivers(self) -> dict[str, tuple[str, float]]:
+        """Each receiver's ROS output topic and sampling rate, by node name."""
+        return {n.name: (n.config.output.removeprefix("ros:"), float(n.config.sampling_rate))
+                for n in self.nodes if isinstance(n.config, ReceiverConfig)}
+
 
 def coach_config(options: SessionConfig) -> CoachNodeConfig:
     """The coach's configuration: its YAML (or the packaged one) < what the session sets."""
@@ -201,14 +207,17 @@ def plan_session(options: SessionConfig, folder: SessionFolder, device_id: str,
     nodes.extend(media_nodes(options))
     nodes.append(heart_rate_node(options, device_id))
     # Each receiver holds its input until all of its listeners are there, so the bag and the
-    # coach (or processor) get every sample from the first: HR goes to the launcher's watcher,
-    # the recorder and (strap source) the coach; ECG to the processor and the recorder.
-    streams = [(HR_RECEIVER, "HR", topics.POLAR_H10_HR, 1, 1.0, 1 + record + (options.hr_source == "strap"))]
+    # coach (or processor) get every sample from the first - also after a restart: HR goes to the
+    # launcher's watcher, the recorder and (strap source) the coach; ECG to the processor and the
+    # recorder; and each output to the launcher's supervision (where a restarted receiver's gap ends).
+    watched = 1
+    streams = [(HR_RECEIVER, "HR", topics.POLAR_H10_HR, 1, 1.0,
+                watched + 1 + record + (options.hr_source == "strap"))]
     if not options.no_ecg:
         # ECG frames of 0.1 s of wall time (13 samples at 1x): at 30x that is 10 frames a second, not 300,
         # which the processor's and the recorder's subscriptions take with ease on a loaded machine.
         ecg_frame = max(13, round(13 * options.speed))
-        streams.append((ECG_RECEIVER, "ECG", topics.POLAR_H10_ECG, ecg_frame, 130.0, 1 + record))
+        streams.append((ECG_RECEIVER, "ECG", topics.POLAR_H10_ECG, ecg_frame, 130.0, watched + 1 + record))
     for name, stream, topic, frame, rate, listeners in streams:
         values: dict[str, Any] = {
             "input": f"lsl:PolarH10/{device_id}/{stream}", "output": f"ros:{topic}", "output_frame": frame,
@@ -232,7 +241,8 @@ def plan_session(options: SessionConfig, folder: SessionFolder, device_id: str,
         # The recorder subscribes to a topic once it discovers it: the session starts only once it records
         # the topics whose first messages matter (the coach's session_start, the first commands).
         capture = f"{RECORDER}_capture"
-        recorded = [topics.COACH_EVENTS, topics.COACH_STATE, topics.QT_COMMANDS, topics.AUDIO_STATUS]
+        recorded = [topics.COACH_EVENTS, topics.COACH_STATE, topics.QT_COMMANDS, topics.AUDIO_STATUS,
+                    topics.SESSION_EVENTS]
         if not options.polar:
             recorded.append(topics.PARTICIPANT_STATE)
         listeners += [(topic, capture) for topic in recorded]

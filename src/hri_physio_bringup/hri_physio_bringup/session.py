@@ -22,6 +22,10 @@ coach's input, sends ``start`` to the coach, shows one live progress display (pl
 the output is not a terminal; every node line with ``--verbose``), and when the coach ends the
 session stops every process cleanly (the recorder last), prints a summary and the folder.
 
+A node that dies mid-session is restarted or ends the session (:mod:`hri_physio_bringup.supervision`:
+restartable and essential nodes, backoff, ``--max-restarts``); each restart is said on the console,
+published on ``/session/events`` (recorded) and listed in ``summary.json`` and the report.
+
 ``--source polar:<device id>`` puts a real Polar H10 in the simulated participant's place
 (``polar_streamer``; real time only), ``--source polar-replay:<capture>`` a capture of one.
 """
@@ -74,6 +78,7 @@ from hri_physio_bringup.plan import (
     coach_config,
     plan_session,
 )
+from hri_physio_bringup.supervision import Loss, Restart, Supervisor, gap_line, restarts_text, status_text
 from hri_physio_bringup.view import SessionView, overdue, session_counts, summary
 
 #: Session seconds past the routine's end after which a coach that has not ended is stopped.
@@ -88,9 +93,9 @@ CLOCK_DEPTH = 1000
 class ClockAndWatcher(BackgroundNode):
     """Publishes /clock and watches the session's topics, on its own executor thread."""
 
-    def __init__(self, view: SessionView, hr_topic: str, receivers: list[str],
+    def __init__(self, view: SessionView, hr_topic: str, receivers: dict[str, str],
                  listeners: tuple[tuple[str, str], ...], guard: ClockGuard | None = None,
-                 strap_node: str | None = None) -> None:
+                 strap_node: str | None = None, supervisor: Supervisor | None = None) -> None:
         from rosgraph_msgs.msg import Clock
         from std_msgs.msg import Float64MultiArray, String
 
@@ -107,6 +112,9 @@ class ClockAndWatcher(BackgroundNode):
         # Deep: at high --speed hundreds of clock messages a second must reach the recorder too.
         self.clock_pub = self.node.create_publisher(Clock, "/clock", CLOCK_DEPTH)
         self.control_pub = self.node.create_publisher(String, topics.COACH_CONTROL, command_qos())
+        self.events_pub = self.node.create_publisher(String, topics.SESSION_EVENTS, event_qos())
+        #: Restarts of receivers whose gap their first new frame closed (for the main thread to publish).
+        self.closed_gaps: list[Restart] = []
         strap = hr_topic == topics.POLAR_H10_HR
 
         def strap_samples(frame: Any) -> None:
@@ -167,12 +175,38 @@ class ClockAndWatcher(BackgroundNode):
         self.node.create_subscription(String, topics.QT_MOCK_EVENTS, on_json(count_action), event_qos())
         for node in receivers:
             self.node.create_subscription(String, f"/{node}/status", on_json(receiver_status(node)), 10)
+        if supervisor is not None:
+            self._watch_outputs(receivers, supervisor)
         if strap_node is not None:
             self.node.create_subscription(String, f"/{strap_node}/status",
                                           on_json(lambda data: setattr(view, "strap_status", data)), 10)
         if guard is not None:
             self._watch_the_loop(guard)
         self.start()
+
+    def _watch_outputs(self, receivers: dict[str, str], supervisor: Supervisor) -> None:
+        """Each receiver's output frames: where a restarted receiver's gap begins and ends."""
+        from std_msgs.msg import Float64MultiArray
+
+        from hri_physio_bridge.qos import frame_qos
+        from hri_physio_bridge.ros_frames import msg_to_frame
+
+        def output(node: str) -> Callable[[Float64MultiArray], None]:
+            def callback(msg: Float64MultiArray) -> None:
+                stamps = msg_to_frame(msg).timestamps
+                with self.lock:
+                    closed = supervisor.output(node, stamps)
+                    if closed is not None:
+                        self.closed_gaps.append(closed)
+            return callback
+
+        for node, topic in receivers.items():
+            supervisor.track(node)
+            self.node.create_subscription(Float64MultiArray, topic, output(node), frame_qos())
+
+    def publish_event(self, event: dict[str, Any]) -> None:
+        """One event on /session/events (JSON)."""
+        self.events_pub.publish(self._string_cls(data=json.dumps(event)))
 
     def _watch_the_loop(self, guard: ClockGuard) -> None:
         """What the clock guard needs: robot commands and their answers, audio requests and the status."""
@@ -256,6 +290,10 @@ class Outcome:
     node_codes: dict[str, int] = field(default_factory=dict)
     #: How the clock guard held sim time back for the loop (ClockGuard.report), None: no guard.
     clock: dict[str, Any] | None = None
+    #: Every restart of a node (Restart.record) and the loss that ended the session (Loss.event), if any.
+    restarts: list[dict[str, Any]] = field(default_factory=list)
+    lost: dict[str, Any] | None = None
+    awaiting_restart: list[str] = field(default_factory=list)  # dead, their backoff not over at the end
 
     def fail(self, problem: str, code: int = 1) -> None:
         if self.problem is None:
@@ -309,14 +347,63 @@ def wait_for_system(watcher: ClockAndWatcher, group: ProcessGroup, clock: SimClo
             f"robot side listening: {watcher.robot_side_ready()}); see the folder's logs/")
 
 
+class Supervision:
+    """The launcher's side of :mod:`~hri_physio_bringup.supervision`: restarts what died, says so."""
+
+    def __init__(self, supervisor: Supervisor, group: ProcessGroup, watcher: ClockAndWatcher,
+                 console: SessionConsole, out: Outcome, rates: dict[str, float]) -> None:
+        self.supervisor, self.group, self.watcher = supervisor, group, watcher
+        self.console, self.out, self.rates = console, out, rates
+
+    def step(self, sim_t: float, coach: ManagedProcess) -> bool:
+        """Deaths seen, restarts due, receiver gaps closed; True when a loss ends the session."""
+        sup = self.supervisor
+        for p in list(self.group.procs):
+            code = p.returncode
+            if code is None or sup.pending(p.name) or (p is coach and code == 0):
+                continue
+            decision = sup.died(p.name, code, sim_t, p.error_line() if code > 0 else "")
+            if isinstance(decision, Loss):
+                self.watcher.publish_event(decision.event())
+                self.out.fail(decision.problem(sup.max_restarts))
+                return True
+        for record in sup.due():
+            old = next(p for p in self.group.procs if p.name == record.node)
+            self.group.restart(old, f"[session] --- {record.node} died with exit status "
+                               f"{status_text(record.exit_status)}: restart {record.restart} of "
+                               f"{sup.max_restarts}, same command line; its output continues here ---")
+            with self.watcher.lock:  # the receivers' output callbacks read the gap state
+                sup.started(record, sim_t)
+            self.watcher.publish_event(record.event())
+            self.console.say(record.line(sup.max_restarts))
+        with self.watcher.lock:
+            closed, self.watcher.closed_gaps = self.watcher.closed_gaps, []
+        for record in closed:
+            event = record.gap_event(self.rates.get(record.node))
+            record.missing = event["missing"]
+            self.watcher.publish_event(event)
+            self.console.say(gap_line(event))
+        return False
+
+    def report(self) -> None:
+        with self.watcher.lock:
+            self.out.restarts = [r.record() for r in self.supervisor.records]
+        loss = self.supervisor.loss
+        self.out.lost = None if loss is None else loss.event()
+        self.out.awaiting_restart = self.supervisor.awaiting_restart()
+
+
 def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder, console: SessionConsole,
                 view: SessionView, group: ProcessGroup, stop: threading.Event, out: Outcome) -> SimClock:
     """Start the nodes, wait for them, run the routine to its end (or a stop); returns the sim clock."""
-    receivers = [n.name for n in plan.nodes if n.script == "physio_receiver"]
+    receivers = {name: topic for name, (topic, _rate) in plan.receivers.items()}
     # A simulated participant's loop can be held to the clock; a real strap lives in real time.
     guard = None if options.polar else ClockGuard(hr_wait=plan.coach.hr_wait)
     strap = next((n.name for n in plan.nodes if n.script == POLAR_STREAMER), None)
-    watcher = ClockAndWatcher(view, plan.hr_topic, receivers, plan.listeners, guard, strap)
+    supervisor = Supervisor(options.max_restarts)
+    watcher = ClockAndWatcher(view, plan.hr_topic, receivers, plan.listeners, guard, strap, supervisor)
+    rates = {name: rate for name, (_topic, rate) in plan.receivers.items()}
+    supervision = Supervision(supervisor, group, watcher, console, out, rates)
     # The clock runs at --speed from the beginning: before 'start' the participant sits and the
     # processor fills its first window (60 s of ECG) without keeping the launcher waiting.
     clock = SimClock(start=float(int(time.time())), speed=options.speed)
@@ -333,10 +420,7 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
 
         def finished() -> bool:
             watcher.advance(clock)
-            dead = [p for p in group.procs if p.returncode is not None and p is not coach]
-            if dead:
-                p = dead[0]
-                out.fail(f"{p.name} exited early with status {p.returncode}: {p.error_line()}")
+            if supervision.step(clock.t, coach):
                 return True
             with watcher.lock:
                 wall = time.monotonic() - wall0
@@ -360,7 +444,7 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
 
             def tail_done() -> bool:
                 watcher.advance(clock)
-                return clock.t >= end
+                return supervision.step(clock.t, coach) or clock.t >= end
 
             wait_until(tail_done, None, stop=stop, poll=0.01)
         return clock
@@ -368,6 +452,7 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
         if out.stopped_by:
             console.say(f"{out.stopped_by}: stopping the session")
         out.node_codes = group.stop()
+        supervision.report()
         watcher.close()
         if guard is not None:
             out.clock = guard.report(clock)
@@ -422,6 +507,8 @@ def _summary_json(options: SessionConfig, plan: SessionPlan, folder: SessionFold
         "outcome": outcome,
         "exit_status": None if running else out.code,
         "problem": out.problem,
+        "node_lost": out.lost,
+        "restarts": out.restarts,
         "stopped_by": out.stopped_by,
         "wall_seconds": round(out.wall, 3),
         "speed": options.speed,
@@ -435,7 +522,8 @@ def _summary_json(options: SessionConfig, plan: SessionPlan, folder: SessionFold
         "nodes": {
             n.name: {"script": n.script, "config": f"configs/{n.name}.yaml", "log": f"logs/{n.name}.log",
                      "argv": procs[n.name].argv[1:] if n.name in procs else None,
-                     "exit_status": out.node_codes.get(n.name)}
+                     "exit_status": out.node_codes.get(n.name),
+                     "restarts": sum(r["node"] == n.name for r in out.restarts)}
             for n in plan.nodes
         },
         "session": counts,
@@ -510,7 +598,10 @@ def _run(options: SessionConfig, plan: SessionPlan, folder: SessionFolder, claim
         bag = folder.bag if not options.no_record and folder.bag.exists() else None
         now = None if clock is None else clock.t
         console.say(summary(view, out.wall, str(bag) if bag else None, now=now))
-        bad = {name: c for name, c in out.node_codes.items() if c != 0}
+        if out.restarts:
+            console.say(restarts_text(out.restarts))
+        # A node that died and was waiting for its restart when the session ended is in out.restarts.
+        bad = {name: c for name, c in out.node_codes.items() if c != 0 and name not in out.awaiting_restart}
         if bad and out.code == 0:
             out.fail(f"node exit statuses {bad}")
         if not stop.is_set() and view.ended_at is None and out.code == 0:

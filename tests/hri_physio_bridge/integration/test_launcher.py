@@ -144,3 +144,33 @@ def test_children_are_stopped_when_the_launcher_is_killed(on_path: Path, tmp_pat
     while Path(f"/proc/{child}").exists() and "Z" not in Path(f"/proc/{child}/stat").read_text().split()[2]:
         assert time.monotonic() < deadline, "the child outlived its launcher"
         time.sleep(0.02)
+
+
+def test_a_dead_process_restarts_in_its_place_with_its_argv_environment_and_log(on_path: Path,
+                                                                                tmp_path: Path) -> None:
+    script(on_path, "echo_node", (
+        "import os, sys, time\n"
+        "print('args', sys.argv[1:], os.environ['MARK'], flush=True)\n"
+        "print('ready', flush=True)\n"
+        "while True: time.sleep(0.05)\n"))
+    script(on_path, "other_node", "import time\nprint('ready', flush=True)\nwhile True: time.sleep(0.05)\n")
+    group = ProcessGroup(out=io.StringIO())
+    log = tmp_path / "echo.log"
+    first = group.start("echo", "echo_node", ["--conf", "x.yaml"], env={**os.environ, "MARK": "m1"},
+                        echo=False, log_path=log)
+    other = group.start("other", "other_node", env=dict(os.environ))
+    while "ready" not in first.lines:
+        assert first.returncode is None
+    with pytest.raises(RuntimeError, match="echo is still running"):
+        group.restart(first, "restarting")
+    first.proc.send_signal(signal.SIGKILL)
+    first.proc.wait(10)
+    second = group.restart(first, "--- restarted after exit status -9 ---")
+    assert group.procs == [second, other] and second.proc.pid != first.proc.pid
+    while "ready" not in second.lines:
+        assert second.returncode is None
+    group.stop(grace=2.0)
+    assert second.argv == first.argv and second.lines[0] == "args ['--conf', 'x.yaml'] m1"
+    assert log.read_text().splitlines()[:5] == ["args ['--conf', 'x.yaml'] m1", "ready",
+                                            "--- restarted after exit status -9 ---",
+                                            "args ['--conf', 'x.yaml'] m1", "ready"]

@@ -64,7 +64,8 @@ def test_the_session_sets_the_nodes_to_fit_together(tmp_path: Path) -> None:
     hr, ecg = p.node(HR_RECEIVER).config, p.node(ECG_RECEIVER).config
     assert hr.input == "lsl:PolarH10/SIMABC123/HR" and ecg.input == "lsl:PolarH10/SIMABC123/ECG"
     assert participant.lsl_name("HR") == "PolarH10/SIMABC123/HR"  # the receiver resolves the participant's
-    assert (hr.min_consumers, ecg.min_consumers) == (3, 2)  # watcher + recorder + coach; processor + recorder
+    # supervision + watcher + recorder + coach; supervision + processor + recorder
+    assert (hr.min_consumers, ecg.min_consumers) == (4, 3)
     assert p.node(HR_RECEIVER).extra == ("--ros-args", "-r", "__node:=hr_receiver")
     assert p.node(RECORDER).config.output == str(folder.bag)
     coach = p.node(COACH).config
@@ -73,7 +74,7 @@ def test_the_session_sets_the_nodes_to_fit_together(tmp_path: Path) -> None:
     assert p.node(RECORDER).extra == () and p.node(PROCESSOR).extra == ()  # on wall time
     p, _ = plan(tmp_path, no_record=True, hr_source="ecg", log_data=True)
     hr = p.node(HR_RECEIVER).config
-    assert hr.min_consumers == 1 and hr.log_data and hr.log_name.endswith("csv/hr.csv")
+    assert hr.min_consumers == 2 and hr.log_data and hr.log_name.endswith("csv/hr.csv")
     assert p.coach.hr_topic == topics.POLAR_H10_ECG_HR and p.coach.min_valid_samples == 3
 
 
@@ -210,12 +211,20 @@ def test_ecg_frames_carry_a_tenth_of_a_wall_second_at_any_speed(tmp_path: Path, 
     assert p.node(HR_RECEIVER).config.output_frame == 1
 
 
+@pytest.mark.parametrize(("value", "message"), [(-1, "max_restarts: expected greater than or equal to 0"),
+                                                (101, "max_restarts: expected less than or equal to 100")])
+def test_the_restart_limit_is_checked(value: int, message: str) -> None:
+    assert SessionConfig.from_mapping({}, "command line").max_restarts == 3
+    with pytest.raises(ConfigError, match=message):
+        SessionConfig.from_mapping({"max_restarts": value}, "command line")
+
+
 def test_the_session_starts_once_the_recorder_records_what_its_first_messages_need(tmp_path: Path) -> None:
     from hri_physio_bridge import topics
 
     p, _ = plan(tmp_path)
     capture = {topic for topic, node in p.listeners if node == "physio_recorder_capture"}
     assert capture == {topics.COACH_EVENTS, topics.COACH_STATE, topics.QT_COMMANDS, topics.AUDIO_STATUS,
-                       topics.PARTICIPANT_STATE}
+                       topics.PARTICIPANT_STATE, topics.SESSION_EVENTS}
     p, _ = plan(tmp_path, no_record=True)
     assert all(node != "physio_recorder_capture" for _topic, node in p.listeners)

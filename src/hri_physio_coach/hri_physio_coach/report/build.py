@@ -105,7 +105,7 @@ def make_report(path: Path | str, out: Path | str | None = None, hr_topic: str |
     where: ReportInput = resolve(Path(path), Path(out) if out is not None else None)
     tables = read_bag(where.bag)
     clock = SessionClock.from_tables(tables)
-    timeline = build_timeline(tables, topics.COACH_EVENTS, topics.COACH_STATE, clock)
+    timeline = build_timeline(tables, topics.COACH_EVENTS, topics.COACH_STATE, clock, topics.SESSION_EVENTS)
     if timeline is None:
         raise ReportError(f"{where.bag} holds no coach events on {topics.COACH_EVENTS}: not a recording of a "
                           "qt_physio_coach session")
@@ -128,6 +128,10 @@ def make_report(path: Path | str, out: Path | str | None = None, hr_topic: str |
         missing.append(f"the session did not finish ({timeline.outcome}{why}): the report covers what ran")
     if not timeline.rule_updates:
         missing.append("no rule updates in the bag")
+    for ev in timeline.session_events:
+        if ev.get("event") == "node_died":
+            missing.append(f"the session ended early: {ev.get('node')} died (exit status "
+                           f"{ev.get('exit_status')}, {ev.get('reason')})")
 
     numbers = metrics.compute(tables, timeline, clock, hr)
     hrv_series = metrics.hrv_series(tables)

@@ -41,6 +41,8 @@ OUTCOME_STYLE = {
 TEMPO_COLOR = "#7b4fa0"
 SPEED_COLOR = "#b0642a"
 LOST_COLOR = "#f3c9c6"
+RESTART_COLOR = "#8a5a00"
+DIED_COLOR = "#b00020"
 
 
 def _pretty(name: str) -> str:
@@ -83,6 +85,30 @@ def _strip(ax, spans: Sequence[Span], t0: float, colors: Sequence[str], text_col
     ax.tick_params(axis="x", which="both", bottom=False, labelbottom=False)
 
 
+def _session_marks(ax, timeline: Timeline, t0: float) -> list:
+    """The launcher's events: a node down until its restart (a band, named), a node lost (a line)."""
+    handles: list = []
+    restarts = [e for e in timeline.session_events if e.get("event") == "node_restarted"]
+    for ev in restarts:
+        t = float(ev["t"])
+        down = float(ev.get("down_s") or 0.0)
+        ax.axvspan(_minutes(t - down, t0), _minutes(t, t0), color=RESTART_COLOR, alpha=0.35, lw=0,
+                   zorder=0.6)
+        ax.axvline(_minutes(t, t0), color=RESTART_COLOR, lw=0.9, ls="-.", zorder=2)
+        ax.annotate(str(ev.get("node")), (_minutes(t, t0), 0.01), xycoords=("data", "axes fraction"),
+                    rotation=90, va="bottom", ha="right", fontsize=6.5, color=RESTART_COLOR)
+    if restarts:
+        handles.append(Line2D([], [], color=RESTART_COLOR, ls="-.",
+                              label=f"Node restarted ({len(restarts)})"))
+    lost = [e for e in timeline.session_events if e.get("event") == "node_died"]
+    for ev in lost:
+        ax.axvline(_minutes(float(ev["t"]), t0), color=DIED_COLOR, lw=1.4, zorder=2)
+    if lost:
+        names = ", ".join(str(e.get("node")) for e in lost)
+        handles.append(Line2D([], [], color=DIED_COLOR, lw=1.4, label=f"Session ended: {names} died"))
+    return handles
+
+
 def hr_session_figure(path: Path, timeline: Timeline, hr: HeartRate | None, title: str) -> Path:
     """Thesis Fig. 4.12 for this session."""
     t0 = timeline.t0
@@ -117,6 +143,7 @@ def hr_session_figure(path: Path, timeline: Timeline, hr: HeartRate | None, titl
         ax.axvspan(_minutes(gap["silent_since"], t0), _minutes(stop, t0), color=LOST_COLOR, lw=0, zorder=0.5)
     if timeline.hr_gaps:
         handles.append(Patch(facecolor=LOST_COLOR, label="No HR at the coach"))
+    handles += _session_marks(ax, timeline, t0)
 
     y_values: list[float] = []
     if hr is not None:

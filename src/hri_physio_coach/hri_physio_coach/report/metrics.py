@@ -159,6 +159,7 @@ def compute(tables: BagTables, timeline: Timeline, clock: SessionClock,
         "receivers": _receivers(tables),
         "recorder_lost_messages": tables.custom_data.get("lost_messages"),
         "hrv": hrv_summary(tables),
+        "session_events": session_events(timeline),
     }
     if hr is not None:
         in_session = (hr.t >= timeline.t0) & (hr.t <= timeline.end)
@@ -166,6 +167,13 @@ def compute(tables: BagTables, timeline: Timeline, clock: SessionClock,
                               "valid_in_session": int((in_session & hr.valid).sum()),
                               "period_s": _clean(hr.period, 4)}
     return report
+
+
+def session_events(timeline: Timeline) -> list[dict[str, Any]]:
+    """The launcher's events (restarts, receiver gaps, a lost node), ``t_s`` from the session's start."""
+    keys = ("event", "node", "exit_status", "restart", "down_s", "reason", "missing")
+    return [{"t_s": _clean(float(ev["t"]) - timeline.t0, 2), **{k: ev[k] for k in keys if k in ev}}
+            for ev in timeline.session_events]
 
 
 def _adaptations(timeline: Timeline) -> dict[str, Any]:

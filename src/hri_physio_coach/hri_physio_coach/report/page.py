@@ -135,6 +135,18 @@ def render(report: dict[str, Any], figures: dict[str, Path], configs: dict[str, 
         lost = escape(report["recorder_lost_messages"])
         parts.append(f"<p class='warn'>The recorder missed messages: {lost}</p>")
 
+    events = report.get("session_events") or []
+    if events:
+        parts.append("<h2>Node restarts and losses</h2>")
+        parts.append("<p class='note'>From the session launcher (/session/events): a node that died and was "
+                     "started again (down: session seconds until it was relaunched), the samples a restarted "
+                     "receiver could not get, a node whose loss ended the session.</p>")
+        parts.append(_table(["Time (s)", "Event", "Node", "Exit status", "Restart", "Down (s)",
+                             "Samples lost", "Reason"],
+                            [[e.get("t_s"), e.get("event"), e.get("node"), e.get("exit_status"),
+                              e.get("restart"), e.get("down_s"), e.get("missing"), e.get("reason")]
+                             for e in events]))
+
     hrv = report.get("hrv") or {}
     parts.append("<h2>Heart-rate variability (frequency domain)</h2>")
     if hrv:

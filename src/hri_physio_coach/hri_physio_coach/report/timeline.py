@@ -123,6 +123,8 @@ class Timeline:
     pace: list[tuple[float, float, float]]  # (t, gesture speed, music tempo) steps
     events: list[dict[str, Any]] = field(default_factory=list)
     hr_topic: str | None = None  # if the coach said so in its events/state
+    #: The session launcher's events (node restarts, receiver gaps, the loss of a node), by time.
+    session_events: list[dict[str, Any]] = field(default_factory=list)
 
 
 def outcome_of(decision: dict[str, Any]) -> RuleOutcome:
@@ -162,8 +164,9 @@ def _spans(starts: list[dict[str, Any]], name_key: str, kind_key: str, label_key
 
 
 def build_timeline(tables: BagTables, events_topic: str, state_topic: str,
-                   clock: SessionClock) -> Timeline | None:
-    """The coach's session from its events (``None``: the bag holds no coach events)."""
+                   clock: SessionClock, session_topic: str | None = None) -> Timeline | None:
+    """The coach's session from its events (``None``: the bag holds no coach events), with the
+    launcher's events on ``session_topic`` (its sim time ``t``, the coach's clock)."""
     messages: list[JsonMessage] = [m for m in tables.json.get(events_topic, []) if "event" in m.data]
     if not messages:
         return None
@@ -230,8 +233,21 @@ def build_timeline(tables: BagTables, events_topic: str, state_topic: str,
         phases=phases, activities=activities, zone=zone, calibration=calib[-1] if calib else None,
         rule_updates=updates, behaviours=by_kind.get("behaviour", []),
         hr_gaps=_hr_gaps(by_kind, end), pace=_pace(states, by_kind.get("rule_update", [])),
-        events=events, hr_topic=hr_topic,
+        events=events, hr_topic=hr_topic, session_events=_session_events(tables, session_topic, clock),
     )
+
+
+def _session_events(tables: BagTables, topic: str | None, clock: SessionClock) -> list[dict[str, Any]]:
+    """The launcher's events in time order (one without a time: its receive time)."""
+    out = []
+    for m in tables.json.get(topic, []) if topic else []:
+        if "event" not in m.data:
+            continue
+        ev = dict(m.data)
+        if _num(ev.get("t")) is None:
+            ev["t"] = float(clock(m.log_ns))
+        out.append(ev)
+    return sorted(out, key=lambda e: float(e["t"]))
 
 
 def _hr_gaps(by_kind: dict[str, list[dict[str, Any]]], end: float) -> list[dict[str, Any]]:

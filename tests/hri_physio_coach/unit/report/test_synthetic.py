@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -217,3 +218,44 @@ def test_bag_without_coach_events_is_refused(tmp_path: Path) -> None:
     with pytest.raises(ReportError, match="no coach events"):
         make_report(bag)
     assert not (tmp_path / "report.json").exists()
+
+
+def test_the_launchers_restarts_and_a_lost_node_are_listed_and_drawn(tmp_path: Path) -> None:
+    b = session(stop_at=120.0, ecg=False)
+    b.event(wall(64), {"t": SIM0 + 64, "event": "node_restarted", "node": "qt_controller", "exit_status": -9,
+                       "down_s": 4.0, "restart": 1}, topic=topics.SESSION_EVENTS)
+    b.event(wall(64), {"t": SIM0 + 64, "event": "receiver_gap", "node": "hr_receiver", "restart": 1,
+                       "last_before": 1060.5, "first_after": 1066.5, "missing": 5},
+            topic=topics.SESSION_EVENTS)
+    b.event(wall(119), {"t": SIM0 + 119, "event": "node_died", "node": "qt_physio_coach", "exit_status": -9,
+                        "restart": 0, "reason": "essential"}, topic=topics.SESSION_EVENTS)
+    without = make_report(session(stop_at=120.0, ecg=False).write(tmp_path / "plain"), out=tmp_path / "r0")
+    result = make_report(b.write(tmp_path / "bag"), out=tmp_path / "r1")
+    events = result.report["session_events"]
+    assert [(e["t_s"], e["event"], e["node"]) for e in events] == [
+        (64.0, "node_restarted", "qt_controller"), (64.0, "receiver_gap", "hr_receiver"),
+        (119.0, "node_died", "qt_physio_coach")]
+    assert events[0]["down_s"] == 4.0 and events[1]["missing"] == 5 and events[2]["reason"] == "essential"
+    assert "the session ended early: qt_physio_coach died (exit status -9, essential)" in result.missing
+    html = (tmp_path / "r1" / "report.html").read_text()
+    assert "Node restarts and losses" in html and "qt_controller" in html and "node_died" in html
+    assert without.report["session_events"] == []
+    assert "Node restarts" not in (tmp_path / "r0" / "report.html").read_text()
+
+
+def test_the_timeline_figure_marks_a_restart_and_a_lost_node() -> None:
+    from matplotlib.figure import Figure
+
+    from hri_physio_coach.report.figures import _session_marks
+
+    timeline = SimpleNamespace(session_events=[
+        {"t": 100.0, "event": "node_restarted", "node": "qt_controller", "down_s": 5.0},
+        {"t": 110.0, "event": "receiver_gap", "node": "hr_receiver"},
+        {"t": 160.0, "event": "node_died", "node": "physio_recorder"}])
+    ax = Figure().add_subplot()
+    handles = _session_marks(ax, timeline, t0=40.0)
+    assert [h.get_label() for h in handles] == ["Node restarted (1)", "Session ended: physio_recorder died"]
+    assert [line.get_xdata()[0] for line in ax.get_lines()] == [1.0, 2.0]  # minutes from t0
+    assert [t.get_text() for t in ax.texts] == ["qt_controller"]
+    (band,) = ax.patches
+    assert band.get_x() == pytest.approx(55 / 60) and band.get_width() == pytest.approx(5 / 60)
