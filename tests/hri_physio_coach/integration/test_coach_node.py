@@ -332,6 +332,7 @@ def test_a_second_clock_stops_the_coach_but_a_replaced_one_does_not(probe: Probe
 # --- the whole session under sim time ------------------------------------------------------------
 STEP = 0.25  # s of sim time per /clock message: <= every listening node's timer period
 SPEEDUP = 36.0  # sim seconds per wall second: 23 min in ~38 s
+HR_WAIT = 3.0  # the coach's default hr_wait (s)
 WARM, COND, COOL, END = 180.0, 480.0, 1080.0, 1380.0
 
 
@@ -344,6 +345,24 @@ def scripted_hr(rel: float) -> float:
     if rel < COOL:
         return 140.0
     return 165.0
+
+
+def hold_for_the_coach(probe: Probe, t: float, stop: threading.Event, most: float = 5.0) -> float:
+    """Wall seconds spent not moving the clock to ``t`` past a decision's wait for late heart rate
+    (``next_decision`` in /coach/state + hr_wait) before the coach has decided it, as the session
+    launcher's clock guard does: a coach starved for a moment on a busy machine would otherwise handle
+    a burst of /clock before the heart rate queued behind it."""
+    started = time.monotonic()
+
+    def undecided() -> bool:
+        with probe.lock:
+            state = probe.states[-1] if probe.states else None
+        due = None if state is None else state.get("next_decision")
+        return due is not None and t >= due + HR_WAIT - 0.1
+
+    while undecided() and not stop.is_set() and time.monotonic() - started < most:
+        time.sleep(0.005)
+    return time.monotonic() - started
 
 
 def drive_clock(probe: Probe, stop: threading.Event, t0_holder: dict[str, float]) -> None:
@@ -361,6 +380,7 @@ def drive_clock(probe: Probe, stop: threading.Event, t0_holder: dict[str, float]
             probe.publish_hr(next_hr, scripted_hr(next_hr - t0) if t0 is not None else 85.4)
             next_hr += 1.0
         t0_holder["now"] = t
+        wall0 += hold_for_the_coach(probe, t + STEP, stop)
         delay = wall0 + k * STEP / SPEEDUP - time.monotonic()
         if delay > 0:
             time.sleep(delay)
