@@ -1,5 +1,6 @@
-"""Helpers for the report tests: write session bags with the project's bag writer (no rclpy),
-read bags back with independent readers (rosbags' AnyReader, the mcap stream reader)."""
+"""Session bags in tests: write them with the project's bag writer (no rclpy), read them back with
+independent readers (rosbags' AnyReader, the mcap stream reader), and check a recorded session's
+strap samples against the strap's grid (no sample lost, none twice)."""
 
 from __future__ import annotations
 
@@ -182,3 +183,49 @@ class Recomputed:
                 bpm = self.hr_bpm[sel]
                 out[kind] = float(np.mean((bpm >= zone["low"]) & (bpm <= zone["high"])))
         return out
+
+
+#: The simulated strap's streams as the session records them: receiver -> (topic, rate in Hz).
+RECEIVERS = {"hr_receiver": (topics.POLAR_H10_HR, 1.0), "ecg_receiver": (topics.POLAR_H10_ECG, 130.0)}
+
+
+def session_folder(output: str) -> Path:
+    line = next(x for x in output.splitlines() if x.startswith("[session] session folder: "))
+    return Path(line.removeprefix("[session] session folder: "))
+
+
+def bag_messages(bag: Path) -> dict[str, list]:
+    """Every message on the session events and the receivers' outputs, in the order recorded."""
+    from rosbags.highlevel import AnyReader
+
+    from hri_physio_bridge.frames import decode_layout
+
+    wanted = {topics.SESSION_EVENTS, *(topic for topic, _rate in RECEIVERS.values())}
+    out: dict[str, list] = {topic: [] for topic in wanted}
+    with AnyReader([bag]) as reader:
+        conns = [c for c in reader.connections if c.topic in wanted]
+        for conn, _t, raw in reader.messages(connections=conns):
+            msg = reader.deserialize(raw, conn.msgtype)
+            if conn.topic == topics.SESSION_EVENTS:
+                out[conn.topic].append(json.loads(msg.data))
+            else:
+                dims = [(d.label, d.size, d.stride) for d in msg.layout.dim]
+                out[conn.topic].append(decode_layout(dims, msg.layout.data_offset, msg.data).timestamps)
+    return out
+
+
+def check_counter(stamps: np.ndarray, rate: float, gaps: list[tuple[float, float]]) -> int:
+    """The strap's samples are on a grid of 1/rate: each one between the first and the last recorded is
+    in the bag, or inside a recorded gap of its receiver; none twice, none out of order. Returns the
+    samples the gaps account for."""
+    steps = np.diff(stamps) * rate
+    assert np.all(steps > 0.5), "duplicated or reordered samples"
+    assert np.all(np.abs(steps - np.round(steps)) < 0.01), "samples off the strap's grid"
+    accounted = 0
+    for i in np.flatnonzero(steps > 1.5):
+        before, after = stamps[i], stamps[i + 1]
+        inside = [g for g in gaps if g[0] <= before + 1e-9 and after <= g[1] + 1e-9]
+        assert inside, f"{round(steps[i]) - 1} sample(s) missing between {before} and {after}, outside {gaps}"
+        accounted += round(steps[i]) - 1
+    assert len(stamps) + accounted == round((stamps[-1] - stamps[0]) * rate) + 1
+    return accounted
