@@ -16,16 +16,6 @@ def latched_qos() -> QoSProfile:
                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
-def media_request_qos() -> QoSProfile:
-    """What a media streamer is asked to play: state, not a command, so the last request reaches a
-    streamer that joins late or restarts (transient-local, depth 1) and it plays what it should.
-
-    Publishers and subscribers must both use it: a transient-local subscription does not match a
-    volatile publisher.
-    """
-    return latched_qos()
-
-
 def command_qos() -> QoSProfile:
     """Command and control lines: every line must arrive, also in a burst (KEEP_ALL, reliable).
 

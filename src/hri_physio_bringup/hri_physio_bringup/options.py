@@ -44,8 +44,9 @@ class SessionConfig(NodeConfig):
                             "per-session suffix, so two sessions never resolve each other's streams)")
     log_data: bool = option(False, "the receivers also write every sample to CSV (the folder's csv/)",
                             switch=True)
-    startup_timeout: float = option(60.0, "wall time to wait for the nodes and the first heart rate",
-                                    unit="s", gt=0)
+    startup_timeout: float = option(180.0, "wall time to wait for the nodes and the first heart rate (a "
+                                    "dozen processes start in 10-20 s on an idle 2-core machine, minutes "
+                                    "on a busy one)", unit="s", gt=0)
     progress_every: float = option(60.0, "session time between progress lines when the output is not a "
                                    "terminal", unit="s", gt=0)
     verbose: bool = option(False, "every node's output on the console, interleaved (it always goes to "

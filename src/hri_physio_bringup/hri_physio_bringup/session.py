@@ -212,7 +212,7 @@ class ClockAndWatcher(BackgroundNode):
         """What the clock guard needs: robot commands and their answers, audio requests and the status."""
         from std_msgs.msg import String
 
-        from hri_physio_bridge.qos import command_qos, event_qos, media_request_qos
+        from hri_physio_bridge.qos import command_qos, event_qos
 
         def locked(action: Callable[[Any], None]) -> Callable[[Any], None]:
             def callback(msg: Any) -> None:
@@ -231,8 +231,7 @@ class ClockAndWatcher(BackgroundNode):
         sub, now = self.node.create_subscription, lambda: self.sim_now
         sub(String, topics.QT_COMMANDS, locked(lambda _m: guard.command_sent(now())), command_qos())
         sub(String, topics.QT_REPLIES, locked(lambda _m: guard.command_answered()), command_qos())
-        sub(String, topics.AUDIO_REQUEST, locked(lambda _m: guard.media_requested(now())),
-            media_request_qos())
+        sub(String, topics.AUDIO_REQUEST, locked(lambda _m: guard.media_requested(now())), command_qos())
         sub(String, topics.AUDIO_STATUS, locked(settled), event_qos())
 
     def advance(self, clock: SimClock) -> None:

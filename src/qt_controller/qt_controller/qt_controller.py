@@ -25,7 +25,7 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 
 from hri_physio_bridge import topics
 from hri_physio_bridge.config import ConfigError
-from hri_physio_bridge.qos import command_qos, media_request_qos
+from hri_physio_bridge.qos import command_qos
 from hri_physio_bridge.waiting import Clock, wait_until
 from qt_controller import qt_services
 from qt_controller.config import QtRobotOptions
@@ -95,8 +95,7 @@ class QtController(RobotInterface):
             "video": topics.VIDEO_REQUEST,
         }
         for key, topic in names.items():
-            qos = media_request_qos() if key in ("audio", "video") else command_qos()
-            self._pubs[key] = self.node.create_publisher(String, topic, qos)
+            self._pubs[key] = self.node.create_publisher(String, topic, command_qos())
         for part in PARTS:
             self._pubs[part] = self.node.create_publisher(Float64MultiArray, part_topic(part), command_qos())
         self.node.create_subscription(JointState, topics.QT_JOINT_STATE, self._on_joint_state, 10)

@@ -35,7 +35,7 @@ class MediaProbe:
         from sensor_msgs.msg import CompressedImage
         from std_msgs.msg import String
 
-        from hri_physio_bridge.qos import event_qos, media_request_qos
+        from hri_physio_bridge.qos import command_qos, event_qos
 
         self._string = String
         self.node = Node("media_probe", context=context)
@@ -43,8 +43,8 @@ class MediaProbe:
         self.audio: list[dict] = []
         self.video: list[dict] = []
         self.previews: list[tuple[float, np.ndarray]] = []
-        self.audio_pub = self.node.create_publisher(String, topics.AUDIO_REQUEST, media_request_qos())
-        self.video_pub = self.node.create_publisher(String, topics.VIDEO_REQUEST, media_request_qos())
+        self.audio_pub = self.node.create_publisher(String, topics.AUDIO_REQUEST, command_qos())
+        self.video_pub = self.node.create_publisher(String, topics.VIDEO_REQUEST, command_qos())
         for topic, into in ((topics.AUDIO_STATUS, self.audio), (topics.VIDEO_STATUS, self.video)):
             self.node.create_subscription(String, topic, lambda m, into=into: self._add(into, m), event_qos())
         self.node.create_subscription(CompressedImage, topics.VIDEO_PREVIEW, self._on_preview, 10)
@@ -226,26 +226,3 @@ def test_a_window_without_a_display_is_a_startup_error() -> None:
                        timeout=60, env=env, stdin=subprocess.DEVNULL)
     assert p.returncode == 2 and "no display server" in p.stderr and len(p.stderr.strip().splitlines()) == 1
 
-
-def test_a_restarted_streamer_plays_the_last_request_once(ros_context: Any, tmp_path: Path) -> None:
-    """The request topic is latched: a streamer that restarts (kill -9) gets what it should play."""
-    probe = MediaProbe(ros_context)
-    options = ("--sink", "null", "--cache-dir", str(tmp_path / "cache"), "--fade", "0")
-    try:
-        with NodeProcess("audio_streamer", *options) as first:
-            wait_until(lambda: probe.node.count_subscribers(topics.AUDIO_REQUEST) >= 1, 60,
-                       lambda: f"the streamer's request subscription\n{first.output}")
-            probe.send_audio("beat:100")
-            probe.send_audio("beat:96")  # the last request is what a restarted streamer gets
-            probe.wait_audio("beat:96 playing",
-                             lambda s: s["state"] == "playing" and s.get("source") == "beat:96", timeout=60)
-            first.proc.kill()
-            first.proc.wait()
-        with NodeProcess("audio_streamer", *options) as second:
-            # A status of the new process: one request received (the latched one), not the two sent.
-            again = probe.wait_audio("beat:96 playing in the restarted streamer",
-                                     lambda s: s["requests"]["received"] == 1 and s["state"] == "playing",
-                                     timeout=60)
-            assert again["source"] == "beat:96", second.output
-    finally:
-        probe.close()

@@ -11,7 +11,7 @@ from std_msgs.msg import String
 
 from audio_video_streamers.status import MediaStatus, State
 from hri_physio_bridge.node_runner import ManagedNode
-from hri_physio_bridge.qos import event_qos, media_request_qos
+from hri_physio_bridge.qos import command_qos, event_qos
 
 
 class MediaPlayer(Protocol):
@@ -43,7 +43,7 @@ class MediaStreamerNode(ManagedNode):
 
     def attach(self, player: MediaPlayer, request_topic: str, status_rate: float) -> None:
         self.player = player
-        self.create_subscription(String, request_topic, self._on_request, media_request_qos())
+        self.create_subscription(String, request_topic, self._on_request, command_qos())
         self.create_timer(1.0 / status_rate, lambda: self.publish_status(self.player.status()))
 
     def now(self) -> float:
