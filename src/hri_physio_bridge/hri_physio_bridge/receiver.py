@@ -48,8 +48,9 @@ from hri_physio_bridge.waiting import Backoff, wait_for_consumers
 RATE_TOLERANCE = 0.05
 #: Seconds between two warnings about the measured rate (each says how often it was off since).
 RATE_WARNING_PERIOD = 60.0
-#: On a stop, the input is still read for what it already holds, for at most this long.
-STOP_DRAIN = 0.5
+#: On a stop, the input is still read for what it already holds (until it is empty), for at most this
+#: long: an input that keeps delivering (a source still streaming) is cut there, with an error line.
+STOP_DRAIN = 5.0
 
 
 class ReceiverConfig(NodeConfig):
@@ -405,10 +406,15 @@ class PhysioReceiver:
         self._take_what_arrived()
 
     def _take_what_arrived(self) -> None:
-        """On a stop: what the input already holds is forwarded too (within ``STOP_DRAIN`` s)."""
+        """On a stop: what the input already holds is forwarded too, until it is empty (at most
+        ``STOP_DRAIN`` s; what an input still delivering after that is left unread is said as an error)."""
         deadline = self._monotonic() + STOP_DRAIN
         taken = 0
-        while self._monotonic() < deadline:
+        while True:
+            if self._monotonic() >= deadline:
+                self.log.error(f"stopping: {self.source.uri} still delivered after {STOP_DRAIN:g} s of "
+                               f"taking what had arrived ({taken} sample(s) taken); the rest is left unread")
+                break
             try:
                 chunk = self.source.receive(timeout=0.0)
             except StreamerError:

@@ -652,3 +652,44 @@ def test_samples_that_arrived_before_the_stop_are_forwarded() -> None:
     src.arrived.set()
     rx.stop()  # before: the producer saw the stop and left these 30 samples in the input
     np.testing.assert_array_equal(np.concatenate([f.values[:, 0] for f in sink.frames]), np.arange(30))
+
+
+class EndlessSource(MemorySource):
+    """An input that never runs dry once the stop comes: every receive gives another chunk, and each
+    takes 0.1 s of the receiver's (fake) clock."""
+
+    def __init__(self, spec: StreamSpec, now: list[float]) -> None:
+        super().__init__(spec)
+        self.now = now
+        self.next = 0
+        self.stopping = threading.Event()
+
+    def receive(self, timeout: float = 0.1) -> Frame | None:
+        if not self.stopping.is_set():
+            time.sleep(min(timeout, 0.01))
+            return None
+        self.now[0] += 0.1
+        frame = chunk(self.next, 10)
+        self.next += 10
+        return frame
+
+
+def test_an_input_that_keeps_delivering_at_the_stop_is_cut_with_an_error_line(
+        caplog: pytest.LogCaptureFixture) -> None:
+    now = [0.0]
+    cfg = ReceiverConfig.from_mapping({"input": "mem:source", "output": "mem:sink", "sampling_rate": 100,
+                                       "output_frame": 10})
+    src = EndlessSource(StreamSpec("src", nominal_rate=100.0), now)
+    sink = MemorySink()
+    rx = PhysioReceiver(cfg, src, sink, log=logging.getLogger("test"), monotonic=lambda: now[0])
+    rx.start()
+    src.stopping.set()
+    with caplog.at_level(logging.INFO, logger="test"):
+        rx.stop()
+    errors = [r.getMessage() for r in caplog.records if r.levelno == logging.ERROR]
+    assert len(errors) == 1 and "still delivered after 5 s" in errors[0] and "left unread" in errors[0]
+    published = np.concatenate([f.values[:, 0] for f in sink.frames])
+    # What was taken (at least the 5 s of the fake clock the drain lasted, 10 samples per 0.1 s) is
+    # published whole, in order.
+    np.testing.assert_array_equal(published, np.arange(len(published)))
+    assert len(published) >= 490
