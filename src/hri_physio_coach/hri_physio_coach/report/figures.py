@@ -38,11 +38,9 @@ OUTCOME_STYLE = {
     RuleOutcome.NO_CHANGE: {"marker": "o", "color": "#8a8a8a", "size": 22},
     RuleOutcome.NO_UPDATE: {"marker": "X", "color": "#444444", "size": 30},
 }
-TEMPO_COLOR = "#7b4fa0"
-SPEED_COLOR = "#b0642a"
-LOST_COLOR = "#f3c9c6"
-RESTART_COLOR = "#8a5a00"
-DIED_COLOR = "#b00020"
+#: Colours of the timeline's other marks: music tempo, gesture speed, heart rate lost, node restarts
+#: and a node lost.
+COLORS = {"tempo": "#7b4fa0", "speed": "#b0642a", "lost": "#f3c9c6", "restart": "#8a5a00", "died": "#b00020"}
 
 
 def _pretty(name: str) -> str:
@@ -92,20 +90,20 @@ def _session_marks(ax, timeline: Timeline, t0: float) -> list:
     for ev in restarts:
         t = float(ev["t"])
         down = float(ev.get("down_s") or 0.0)
-        ax.axvspan(_minutes(t - down, t0), _minutes(t, t0), color=RESTART_COLOR, alpha=0.35, lw=0,
+        ax.axvspan(_minutes(t - down, t0), _minutes(t, t0), color=COLORS["restart"], alpha=0.35, lw=0,
                    zorder=0.6)
-        ax.axvline(_minutes(t, t0), color=RESTART_COLOR, lw=0.9, ls="-.", zorder=2)
+        ax.axvline(_minutes(t, t0), color=COLORS["restart"], lw=0.9, ls="-.", zorder=2)
         ax.annotate(str(ev.get("node")), (_minutes(t, t0), 0.01), xycoords=("data", "axes fraction"),
-                    rotation=90, va="bottom", ha="right", fontsize=6.5, color=RESTART_COLOR)
+                    rotation=90, va="bottom", ha="right", fontsize=6.5, color=COLORS["restart"])
     if restarts:
-        handles.append(Line2D([], [], color=RESTART_COLOR, ls="-.",
+        handles.append(Line2D([], [], color=COLORS["restart"], ls="-.",
                               label=f"Node restarted ({len(restarts)})"))
     lost = [e for e in timeline.session_events if e.get("event") == "node_died"]
     for ev in lost:
-        ax.axvline(_minutes(float(ev["t"]), t0), color=DIED_COLOR, lw=1.4, zorder=2)
+        ax.axvline(_minutes(float(ev["t"]), t0), color=COLORS["died"], lw=1.4, zorder=2)
     if lost:
         names = ", ".join(str(e.get("node")) for e in lost)
-        handles.append(Line2D([], [], color=DIED_COLOR, lw=1.4, label=f"Session ended: {names} died"))
+        handles.append(Line2D([], [], color=COLORS["died"], lw=1.4, label=f"Session ended: {names} died"))
     return handles
 
 
@@ -140,9 +138,10 @@ def hr_session_figure(path: Path, timeline: Timeline, hr: HeartRate | None, titl
         handles.append(Line2D([], [], color="#777777", ls=":", label=f"HR$_{{rest}}$ {zone.hr_rest:.1f} bpm"))
     for gap in timeline.hr_gaps:
         stop = gap["resumed"] if gap["resumed"] is not None else timeline.end
-        ax.axvspan(_minutes(gap["silent_since"], t0), _minutes(stop, t0), color=LOST_COLOR, lw=0, zorder=0.5)
+        ax.axvspan(_minutes(gap["silent_since"], t0), _minutes(stop, t0), color=COLORS["lost"], lw=0,
+                   zorder=0.5)
     if timeline.hr_gaps:
-        handles.append(Patch(facecolor=LOST_COLOR, label="No HR at the coach"))
+        handles.append(Patch(facecolor=COLORS["lost"], label="No HR at the coach"))
     handles += _session_marks(ax, timeline, t0)
 
     y_values: list[float] = []
@@ -201,11 +200,11 @@ def _pace_axes(ax, timeline: Timeline, t0: float, end_min: float) -> None:
     exercise = [p.start for p in timeline.phases if p.kind in EXERCISE_KINDS]
     start = exercise[0] if exercise else t0
     steps = timeline.pace
-    ax.set_ylabel("Tempo (bpm)", color=TEMPO_COLOR, fontsize=9)
-    ax.tick_params(axis="y", colors=TEMPO_COLOR, labelsize=8)
+    ax.set_ylabel("Tempo (bpm)", color=COLORS["tempo"], fontsize=9)
+    ax.tick_params(axis="y", colors=COLORS["tempo"], labelsize=8)
     twin = ax.twinx()
-    twin.set_ylabel("Gesture speed (×)", color=SPEED_COLOR, fontsize=9)
-    twin.tick_params(axis="y", colors=SPEED_COLOR, labelsize=8)
+    twin.set_ylabel("Gesture speed (×)", color=COLORS["speed"], fontsize=9)
+    twin.tick_params(axis="y", colors=COLORS["speed"], labelsize=8)
     if not steps:
         ax.text(0.5, 0.5, "no pace recorded", transform=ax.transAxes, ha="center", va="center",
                 color="#777777")
@@ -217,8 +216,8 @@ def _pace_axes(ax, timeline: Timeline, t0: float, end_min: float) -> None:
     xs = [_minutes(s[0], t0) for s in shown] + [end_min]
     speed = [s[1] for s in shown] + [shown[-1][1]]
     tempo = [s[2] for s in shown] + [shown[-1][2]]
-    ax.step(xs, tempo, where="post", color=TEMPO_COLOR, lw=1.6)
-    twin.step(xs, speed, where="post", color=SPEED_COLOR, lw=1.3, ls="--")
+    ax.step(xs, tempo, where="post", color=COLORS["tempo"], lw=1.6)
+    twin.step(xs, speed, where="post", color=COLORS["speed"], lw=1.3, ls="--")
     # Tempo in the upper half, gesture speed in the lower half: they step together and would hide
     # each other on a shared scale.
     for axis, values, pad, upper in ((ax, tempo, 2.0, True), (twin, speed, 0.02, False)):
@@ -228,8 +227,8 @@ def _pace_axes(ax, timeline: Timeline, t0: float, end_min: float) -> None:
             axis.set_ylim(lo - pad - 1.15 * span, hi + pad)
         else:
             axis.set_ylim(lo - pad, hi + pad + 1.15 * span)
-    ax.legend(handles=[Line2D([], [], color=TEMPO_COLOR, lw=1.6, label="Music tempo"),
-                       Line2D([], [], color=SPEED_COLOR, lw=1.3, ls="--", label="Gesture speed")],
+    ax.legend(handles=[Line2D([], [], color=COLORS["tempo"], lw=1.6, label="Music tempo"),
+                       Line2D([], [], color=COLORS["speed"], lw=1.3, ls="--", label="Gesture speed")],
               loc="best", fontsize=7.5, ncol=2, framealpha=0.92)
     ax.grid(axis="x", color="#eeeeee", lw=0.5)
 
