@@ -23,9 +23,10 @@ LF_BAND = (0.04, 0.15)
 HF_BAND = (0.15, 0.40)
 
 
-def resampled_rr(rr_ms: np.ndarray, fs: float = FS) -> np.ndarray:
+def resampled_rr(rr_ms: np.ndarray, fs: float = FS, beat_times: np.ndarray | None = None) -> np.ndarray:
+    """``beat_times`` (s), when given, place each interval exactly (else the cumulative sum does)."""
     rr = np.asarray(rr_ms, dtype=np.float64)
-    t = np.cumsum(rr) / 1000.0
+    t = np.cumsum(rr) / 1000.0 if beat_times is None else np.asarray(beat_times, dtype=np.float64)[1:]
     t = t - t[0]
     grid = np.arange(0.0, t[-1], 1.0 / fs)
     return CubicSpline(t, rr)(grid)
@@ -62,9 +63,10 @@ def welch_psd(x: np.ndarray, fs: float, segment_seconds: float,
     return np.fft.rfftfreq(nfft, 1.0 / fs), psd
 
 
-def band_powers(rr_ms: np.ndarray, segment_seconds: float = 120.0) -> dict[str, float]:
+def band_powers(rr_ms: np.ndarray, segment_seconds: float = 120.0,
+                beat_times: np.ndarray | None = None) -> dict[str, float]:
     """LF, HF (ms^2), LF/HF, LFnu and HFnu of an RR series (ms) by the method above."""
-    f, p = welch_psd(resampled_rr(rr_ms), FS, segment_seconds)
+    f, p = welch_psd(resampled_rr(rr_ms, FS, beat_times), FS, segment_seconds)
     df = f[1] - f[0]
     lf = float(p[(f >= LF_BAND[0]) & (f < LF_BAND[1])].sum() * df)
     hf = float(p[(f >= HF_BAND[0]) & (f < HF_BAND[1])].sum() * df)

@@ -10,6 +10,7 @@ from typing import Any
 import neurokit2 as nk
 import numpy as np
 
+from helpers import hrv_reference
 from hri_physio_bridge.frames import Frame
 from hri_physio_processing.config import ProcessorConfig
 from hri_physio_processing.features import HEART_SCALARS, SIGNAL_FEATURES
@@ -81,7 +82,8 @@ OUTPUTS = (*SIGNAL_FEATURES["ecg"], *HEART_SCALARS)
 
 
 def nk_direct_ecg(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
-    """The reference: NeuroKit2's functions called by hand, as a user would."""
+    """The reference: NeuroKit2's cleaning, peaks and quality called by hand, as a user would; HRV by
+    the definitions (Task Force 1996)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         clean = nk.ecg_clean(x, sampling_rate=FS)
@@ -92,10 +94,10 @@ def nk_direct_ecg(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict[str, floa
             "quality": float(np.mean(nk.ecg_quality(clean, rpeaks=peaks, sampling_rate=FS,
                                                     method="templatematch"))),
         }
-        td = nk.hrv_time(peaks, sampling_rate=FS)
-        fd = nk.hrv_frequency(peaks, sampling_rate=FS)
-    feats.update(sdnn=td["HRV_SDNN"][0], rmssd=td["HRV_RMSSD"][0], pnn50=td["HRV_pNN50"][0],
-                 lf=fd["HRV_LF"][0], hf=fd["HRV_HF"][0], lfhf=fd["HRV_LFHF"][0])
+    # HRV by the definitions, written independently of the processor (helpers.hrv_reference)
+    beats = np.asarray(peaks) / FS
+    feats.update(hrv_reference.time_domain(np.diff(beats) * 1000.0))
+    feats.update(hrv_reference.band_powers(np.diff(beats) * 1000.0, beat_times=beats))
     return clean, np.asarray(peaks), feats
 
 

@@ -9,8 +9,11 @@ with a reason (``WindowResult.nan_reasons``), never a silent 0. Window-level pro
 * after it ran: mean rate outside [min_hr, max_hr] or signal quality below ``min_quality``
   (noise that is not ECG/PPG still yields "peaks"; these two catch it).
 
-Window-length rules for frequency-domain HRV follow NeuroKit2's guidance: HF needs at
-least 1 min, LF 2 min and LF/HF 5 min of signal; shorter windows give NaN with the reason.
+HRV is computed from the beats by :mod:`hrv` (Task Force 1996 definitions; LF and HF in ms^2
+by Welch over the whole run of beats), not by NeuroKit2's ``hrv_time``/``hrv_frequency``.
+Window-length rules for frequency-domain HRV follow NeuroKit2's guidance: HF needs at least
+1 min, LF 2 min and LF/HF (and LFnu, HFnu, which are LF/HF in another form) 5 min of signal;
+shorter windows give NaN with the reason.
 With ``frequency_domain`` off, :func:`extract` leaves LF, HF and LF/HF to the caller, which
 computes them with :func:`hrv_frequency_of_beats` on a longer run of beats (the processor's
 ``hrv_window_seconds``).
@@ -25,12 +28,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hri_physio_processing import hrv
 from hri_physio_processing.quality import templatematch_quality
 from hri_physio_processing.signal_checks import Flag, check_rate, check_values
 
 MODES = ("ecg", "ppg", "eda")
 
-HEART_SCALARS = ("hr", "sdnn", "rmssd", "pnn50", "lf", "hf", "lfhf", "quality")
+HEART_SCALARS = ("hr", "sdnn", "rmssd", "pnn50", "pnn20", "lf", "hf", "lfhf", "lfnu", "hfnu", "quality")
 EDA_SCALARS = ("tonic", "scr_count", "scr_amplitude")
 SCALARS: dict[str, tuple[str, ...]] = {"ecg": HEART_SCALARS, "ppg": HEART_SCALARS, "eda": EDA_SCALARS}
 #: Name of the peak-mask output per mode.
@@ -43,9 +47,8 @@ SIGNAL_FEATURES: dict[str, tuple[str, ...]] = {
 }
 
 #: Minimum window length (s) for each frequency-domain HRV feature (NeuroKit2's guidance).
-MIN_SECONDS = {"hf": 60.0, "lf": 120.0, "lfhf": 300.0}
-FREQUENCY_SCALARS = ("lf", "hf", "lfhf")
-_NK_FREQUENCY_COLUMNS = {"lf": "HRV_LF", "hf": "HRV_HF", "lfhf": "HRV_LFHF"}
+MIN_SECONDS = {"hf": 60.0, "lf": 120.0, "lfhf": 300.0, "lfnu": 300.0, "hfnu": 300.0}
+FREQUENCY_SCALARS = hrv.FREQUENCY_KEYS
 
 QUALITY_METHODS = ("templatematch", "averageQRS", "zhao2018", "none")
 #: zhao2018 answers with a category; published as a number.
@@ -226,23 +229,18 @@ def _heart(clean: np.ndarray, peaks: np.ndarray, quality: Callable[[], float],
     if math.isfinite(q) and q < cfg.min_quality:
         flag = Flag("low_quality", f"signal quality {q:.3f} below min_quality {cfg.min_quality:g}")
         return _nan_all(res, flag, keep=("quality",))
-    hrv_time = nk.hrv_time(peaks, sampling_rate=fs)
-    for key, col in (("sdnn", "HRV_SDNN"), ("rmssd", "HRV_RMSSD"), ("pnn50", "HRV_pNN50")):
-        res.scalars[key] = float(hrv_time[col].iloc[0])
+    beat_times = peaks / float(cfg.sampling_rate)
+    res.scalars.update(hrv.time_domain(np.diff(beat_times) * 1000.0))
     if not cfg.frequency_domain:
         for key in FREQUENCY_SCALARS:
             res.nan_reasons[key] = "computed on the long HRV window (hrv_window_seconds), not per window"
     else:
-        if duration >= min(MIN_SECONDS.values()):
-            hrv_freq = nk.hrv_frequency(peaks, sampling_rate=fs)
-            for key, col in _NK_FREQUENCY_COLUMNS.items():
-                res.scalars[key] = float(hrv_freq[col].iloc[0])
-        res.nan_reasons.update(_too_short(duration, "window"))
-        for key in res.nan_reasons.keys() & set(FREQUENCY_SCALARS):
-            res.scalars[key] = math.nan
+        values, reasons = hrv_frequency_of_beats(beat_times, duration)
+        res.scalars.update(values)
+        res.nan_reasons.update(reasons)
     for key, value in res.scalars.items():
         if not math.isfinite(value) and key not in res.nan_reasons:
-            res.nan_reasons[key] = "NeuroKit2 returned NaN (too few or too irregular beats)"
+            res.nan_reasons[key] = "not computable from this window's beats (too few or too irregular)"
     return res
 
 
@@ -253,35 +251,31 @@ def _too_short(seconds: float, what: str) -> dict[str, str]:
 
 
 def hrv_frequency_of_beats(beat_times: np.ndarray, seconds: float) -> tuple[dict[str, float], dict[str, str]]:
-    """LF, HF and LF/HF of a run of beats (times in s, no gap between them) spanning ``seconds``.
+    """LF, HF (ms^2), LF/HF, LFnu, HFnu of a run of beats (times in s, no gap between them) spanning
+    ``seconds``, by :func:`hrv.band_powers`.
 
-    The RR series (ms) goes to NeuroKit2's ``hrv_frequency`` as ``{"RRI": ...}``: the same
-    computation as from R-peak indices, but from the beats' source timestamps, so beats found by
-    different windows join into one series. Returns the values and the NaN reasons.
+    From the beats' source timestamps, so beats found by different windows join into one series.
+    Returns the values and the NaN reasons.
     """
-    import neurokit2 as nk
-
     beats = np.asarray(beat_times, dtype=np.float64).reshape(-1)
     values = dict.fromkeys(FREQUENCY_SCALARS, math.nan)
     reasons = _too_short(seconds, "clean beat series of")
     if len(reasons) == len(FREQUENCY_SCALARS):
         return values, reasons
-    if beats.shape[0] < 3:
+    if beats.shape[0] < 5:
         reason = f"only {beats.shape[0]} beat(s) in the {seconds:g} s HRV window"
         return values, dict.fromkeys(FREQUENCY_SCALARS, reason)
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            freq = nk.hrv_frequency({"RRI": np.diff(beats) * 1000.0})
-    except Exception as exc:  # NeuroKit2 raises many types on degenerate input
-        reason = f"NeuroKit2 failed: {type(exc).__name__}: {exc}"
+        powers = hrv.band_powers(beats)
+    except ValueError as exc:
+        reason = f"{exc} (in the {seconds:g} s HRV window)"
         return values, dict.fromkeys(FREQUENCY_SCALARS, reason)
-    for key, col in _NK_FREQUENCY_COLUMNS.items():
+    for key in FREQUENCY_SCALARS:
         if key in reasons:
             continue
-        values[key] = float(freq[col].iloc[0])
+        values[key] = powers[key]
         if not math.isfinite(values[key]):
-            reasons[key] = "NeuroKit2 returned NaN (too few or too irregular beats)"
+            reasons[key] = "no power in the LF and HF bands (constant intervals?)"
     return values, reasons
 
 

@@ -30,6 +30,7 @@ NFFT = 4096
 SEGMENT_SECONDS = 120.0
 LF_BAND = (0.04, 0.15)
 HF_BAND = (0.15, 0.40)
+NO_POWER = 1e-6  # ms^2; below it LF + HF is rounding noise of constant intervals
 #: Keys of :func:`band_powers`.
 FREQUENCY_KEYS = ("lf", "hf", "lfhf", "lfnu", "hfnu")
 #: Keys of :func:`time_domain`.
@@ -88,8 +89,7 @@ def band_powers(beat_times: np.ndarray, segment_seconds: float = SEGMENT_SECONDS
     lf = float(p[(f >= LF_BAND[0]) & (f < LF_BAND[1])].sum() * df)
     hf = float(p[(f >= HF_BAND[0]) & (f < HF_BAND[1])].sum() * df)
     total = lf + hf
-    return {
-        "lf": lf, "hf": hf, "lfhf": lf / hf if hf > 0 else float("nan"),
-        "lfnu": 100.0 * lf / total if total > 0 else float("nan"),
-        "hfnu": 100.0 * hf / total if total > 0 else float("nan"),
-    }
+    if not total > NO_POWER:  # constant intervals: rounding noise only
+        return dict.fromkeys(FREQUENCY_KEYS, float("nan"))
+    return {"lf": lf, "hf": hf, "lfhf": lf / hf if hf > 0 else float("nan"),
+            "lfnu": 100.0 * lf / total, "hfnu": 100.0 * hf / total}

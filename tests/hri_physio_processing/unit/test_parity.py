@@ -13,6 +13,7 @@ import neurokit2 as nk
 import numpy as np
 import pytest
 
+from helpers import hrv_reference
 from helpers.processing import (
     frames_of,
     joined,
@@ -23,6 +24,7 @@ from helpers.processing import (
     statuses,
 )
 from hri_physio_processing.config import ProcessorConfig
+from hri_physio_processing.features import HEART_SCALARS, MIN_SECONDS
 
 FS = 130
 
@@ -37,8 +39,7 @@ def test_ecg_features_equal_neurokit_on_each_window(mitdb, window: float, hop: f
     _, out = run_processor(cfg, t, x, random_chunks(n, np.random.default_rng(window), 1, 700))
     wins = statuses(out)
     assert len(wins) >= 2
-    scalars = {name: frames_of(out, name) for name in ("hr", "sdnn", "rmssd", "pnn50", "lf", "hf", "lfhf",
-                                                         "quality")}
+    scalars = {name: frames_of(out, name) for name in HEART_SCALARS}
     clean_t, clean_v = joined(out, "clean")
     np.testing.assert_array_equal(clean_t, t)  # the published parts tile the stream exactly
     for k, st in enumerate(wins):
@@ -52,7 +53,7 @@ def test_ecg_features_equal_neurokit_on_each_window(mitdb, window: float, hop: f
             frame = frames[k]
             assert frame.timestamps[0] == w["t_end"]  # stamped with the end of its window
             got = frame.values[0, 0]
-            need = {"hf": 60, "lf": 120, "lfhf": 300}.get(name, 0)
+            need = MIN_SECONDS.get(name, 0)
             if w["seconds"] < need:
                 assert math.isnan(got) and "shorter than" in st["nan"][name]
             else:
@@ -97,9 +98,10 @@ def test_hrv_time_domain_matches_independent_numpy(mitdb) -> None:
         _, peaks, _ = nk_direct_ecg(x[a : a + st["window"]["samples"]])
         rr = np.diff(peaks) / FS * 1000.0  # ms
         drr = np.diff(rr)
-        # pNN50 as the Task Force (1996) defines it: NN50 over the number of NN intervals.
+        # pNN50 as the Task Force (1996), pyhrv and hrv-analysis compute it: NN50 over the number of
+        # successive differences.
         mine = {"sdnn": np.std(rr, ddof=1), "rmssd": np.sqrt(np.mean(drr**2)),
-                "pnn50": 100.0 * np.count_nonzero(np.abs(drr) > 50.0) / rr.shape[0]}
+                "pnn50": 100.0 * np.count_nonzero(np.abs(drr) > 50.0) / drr.shape[0]}
         for name, value in mine.items():
             got = frames_of(out, name)[k].values[0, 0]
             assert got == pytest.approx(value, rel=0.01), (name, k, got, value)
@@ -120,10 +122,10 @@ def test_ppg_mode_equals_ppg_process() -> None:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             sig, info = nk.ppg_process(seg, sampling_rate=FS)
-            td = nk.hrv_time(info["PPG_Peaks"], sampling_rate=FS)
-            fd = nk.hrv_frequency(info["PPG_Peaks"], sampling_rate=FS)
-        ref = {"hr": sig["PPG_Rate"].mean(), "quality": sig["PPG_Quality"].mean(), "sdnn": td["HRV_SDNN"][0],
-               "rmssd": td["HRV_RMSSD"][0], "pnn50": td["HRV_pNN50"][0], "hf": fd["HRV_HF"][0]}
+        beats = np.asarray(info["PPG_Peaks"]) / FS
+        rr = np.diff(beats) * 1000.0
+        ref = {"hr": sig["PPG_Rate"].mean(), "quality": sig["PPG_Quality"].mean(),
+               **hrv_reference.time_domain(rr), "hf": hrv_reference.band_powers(rr, beat_times=beats)["hf"]}
         for name, value in ref.items():
             assert frames_of(out, name)[k].values[0, 0] == pytest.approx(value, rel=1e-9), name
         assert math.isnan(frames_of(out, "lf")[k].values[0, 0])
