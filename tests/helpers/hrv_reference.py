@@ -85,3 +85,11 @@ def time_domain(rr_ms: np.ndarray) -> dict[str, float]:
     return {"sdnn": float(np.std(rr, ddof=1)), "rmssd": float(np.sqrt(np.mean(d**2))),
             "pnn50": 100.0 * np.count_nonzero(np.abs(d) > 50.0) / d.shape[0],
             "pnn20": 100.0 * np.count_nonzero(np.abs(d) > 20.0) / d.shape[0]}
+
+
+def mean_rate(nn_ms: np.ndarray, tolerance: float = 0.2) -> float:
+    """Mean instantaneous heart rate (bpm, mean of 60000 / NN) over the intervals within ``tolerance``
+    of the median."""
+    nn = np.asarray(nn_ms, dtype=np.float64)
+    med = np.median(nn)
+    return float(np.mean(60000.0 / nn[np.abs(nn - med) <= tolerance * med]))

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hri_physio_processing import hrv
+from hri_physio_processing.artifacts import clean_beats
 from hri_physio_processing.quality import templatematch_quality
 from hri_physio_processing.signal_checks import Flag, check_rate, check_values
 
@@ -50,6 +51,9 @@ SIGNAL_FEATURES: dict[str, tuple[str, ...]] = {
 MIN_SECONDS = {"hf": 60.0, "lf": 120.0, "lfhf": 300.0, "lfnu": 300.0, "hfnu": 300.0}
 FREQUENCY_SCALARS = hrv.FREQUENCY_KEYS
 
+#: Intervals within this fraction of the window's median count as regular (rate and its check).
+REGULAR_TOLERANCE = 0.2
+
 QUALITY_METHODS = ("templatematch", "averageQRS", "zhao2018", "none")
 #: zhao2018 answers with a category; published as a number.
 ZHAO_SCORES = {"Excellent": 1.0, "Barely acceptable": 0.5, "Unacceptable": 0.0}
@@ -70,6 +74,9 @@ class FeatureSettings:
     saturation_fraction: float = 0.01
     rate_tolerance: float = 0.05
     correct_artifacts: bool = False
+    max_beat_gap_seconds: float = 2.0  # a longer interval is a beat-free stretch, not a heartbeat
+    max_corrected_fraction: float = 0.1  # more corrected beats: HRV NaN
+    min_regular_fraction: float = 0.8  # fewer regular intervals: rate and HRV NaN
     frequency_domain: bool = True  # LF, HF, LF/HF on the window itself (off: the caller's long window)
 
     @property
@@ -91,6 +98,7 @@ class WindowResult:
     nan_reasons: dict[str, str] = field(default_factory=dict)
     flags: list[Flag] = field(default_factory=list)
     processed: bool = False  # NeuroKit2 ran on this window
+    beats: dict[str, object] = field(default_factory=dict)  # artefact counts (ECG/PPG), for the status
 
     @property
     def ok(self) -> bool:
@@ -215,11 +223,12 @@ def _heart(clean: np.ndarray, peaks: np.ndarray, quality: Callable[[], float],
     if peaks.shape[0] < max(cfg.min_beats, 2):
         reason = f"only {peaks.shape[0]} beat(s) found, at least {max(cfg.min_beats, 2)} needed"
         return _nan_all(res, Flag("too_few_beats", reason))
-    res.scalars["hr"] = float(np.mean(nk.signal_rate(peaks, sampling_rate=fs, desired_length=n)))
+    # Plausibility on NeuroKit2's mean instantaneous rate of all peaks (noise yields "peaks" too);
+    # the published rate is the robust one below.
+    hr = float(np.mean(nk.signal_rate(peaks, sampling_rate=fs, desired_length=n)))
     res.scalars["quality"] = quality()
     if cfg.quality_method == "none":
         res.nan_reasons["quality"] = "quality_method is none"
-    hr = res.scalars["hr"]
     if not cfg.min_hr <= hr <= cfg.max_hr:
         return _nan_all(res, Flag(
             "implausible_rate",
@@ -229,19 +238,67 @@ def _heart(clean: np.ndarray, peaks: np.ndarray, quality: Callable[[], float],
     if math.isfinite(q) and q < cfg.min_quality:
         flag = Flag("low_quality", f"signal quality {q:.3f} below min_quality {cfg.min_quality:g}")
         return _nan_all(res, flag, keep=("quality",))
-    beat_times = peaks / float(cfg.sampling_rate)
-    res.scalars.update(hrv.time_domain(np.diff(beat_times) * 1000.0))
-    if not cfg.frequency_domain:
+    beats = clean_beats(peaks / float(cfg.sampling_rate), cfg.max_beat_gap_seconds,
+                        cfg.max_corrected_fraction)
+    res.beats = beats.as_status()
+    hr, regular = robust_rate(beats.nn_ms)
+    res.beats["regular_fraction"] = round(regular, 4) if math.isfinite(regular) else None
+    res.scalars["hr"] = hr
+    hrv_reason = beats.hrv_reason
+    if not math.isfinite(hr):
+        res.nan_reasons["hr"] = hrv_reason = "no inter-beat interval left after the artefact checks"
+    elif regular < cfg.min_regular_fraction:
+        hrv_reason = (f"only {regular:.0%} of the clean inter-beat intervals within "
+                      f"{REGULAR_TOLERANCE:.0%} of their median (min_regular_fraction "
+                      f"{cfg.min_regular_fraction:.0%}): noise or an irregular rhythm, no trusted rate")
+        res.scalars["hr"] = math.nan
+        res.nan_reasons["hr"] = hrv_reason
+    elif hrv_reason is None:
+        irregular = round((1.0 - regular) * beats.nn_ms.shape[0])
+        if beats.corrected_beats + irregular > cfg.max_corrected_fraction * beats.beats:
+            # the correction did not catch them all (its thresholds adapt to a contaminated series)
+            hrv_reason = (f"{beats.corrected_beats} beat(s) corrected and {irregular} interval(s) still off "
+                          f"the median by more than {REGULAR_TOLERANCE:.0%}, of {beats.beats} beats (more "
+                          f"than max_corrected_fraction {cfg.max_corrected_fraction:.0%}): artefacts left, "
+                          "HRV would be inflated")
+    if hrv_reason is not None:
+        for key in hrv.TIME_KEYS:
+            res.scalars[key] = math.nan
+            res.nan_reasons[key] = hrv_reason
+        short = _too_short(duration, "window") if cfg.frequency_domain else {}
         for key in FREQUENCY_SCALARS:
-            res.nan_reasons[key] = "computed on the long HRV window (hrv_window_seconds), not per window"
+            res.scalars[key] = math.nan
+            res.nan_reasons[key] = short.get(key, hrv_reason)
     else:
-        values, reasons = hrv_frequency_of_beats(beat_times, duration)
-        res.scalars.update(values)
-        res.nan_reasons.update(reasons)
+        res.scalars.update(hrv.time_domain(beats.nn_ms))
+        if not cfg.frequency_domain:
+            for key in FREQUENCY_SCALARS:
+                res.nan_reasons[key] = "computed on the long HRV window (hrv_window_seconds), not per window"
+        else:
+            values, reasons = hrv_frequency_of_beats(beats.runs[0], duration, cleaned=True)
+            res.scalars.update(values)
+            res.nan_reasons.update(reasons)
     for key, value in res.scalars.items():
         if not math.isfinite(value) and key not in res.nan_reasons:
             res.nan_reasons[key] = "not computable from this window's beats (too few or too irregular)"
     return res
+
+
+def robust_rate(nn_ms: np.ndarray) -> tuple[float, float]:
+    """Heart rate (bpm) from clean NN intervals, and the share of them it rests on.
+
+    The mean instantaneous rate (60000 / NN, averaged over intervals, as pyhrv and hrv-analysis
+    define mean HR) of the intervals within ``REGULAR_TOLERANCE`` of their median: without the
+    spurious or missed beats the correction left (one extra PPG peak splits an interval into two
+    short ones and pulls a plain mean up by several bpm). In a rhythm with many premature beats the
+    ones the correction did not move are left out too, which lowers the rate slightly.
+    """
+    nn = np.asarray(nn_ms, dtype=np.float64)
+    if not nn.shape[0]:
+        return math.nan, math.nan
+    med = float(np.median(nn))
+    inside = nn[np.abs(nn - med) <= REGULAR_TOLERANCE * med]
+    return float(np.mean(60000.0 / inside)), inside.shape[0] / nn.shape[0]
 
 
 def _too_short(seconds: float, what: str) -> dict[str, str]:
@@ -250,9 +307,12 @@ def _too_short(seconds: float, what: str) -> dict[str, str]:
             for key, need in MIN_SECONDS.items() if seconds < need}
 
 
-def hrv_frequency_of_beats(beat_times: np.ndarray, seconds: float) -> tuple[dict[str, float], dict[str, str]]:
+def hrv_frequency_of_beats(beat_times: np.ndarray, seconds: float, max_gap: float = 2.0,
+                           max_corrected_fraction: float = 0.1,
+                           cleaned: bool = False) -> tuple[dict[str, float], dict[str, str]]:
     """LF, HF (ms^2), LF/HF, LFnu, HFnu of a run of beats (times in s, no gap between them) spanning
-    ``seconds``, by :func:`hrv.band_powers`.
+    ``seconds``, by :func:`hrv.band_powers`, after the artefact steps of :func:`artifacts.clean_beats`
+    (unless ``cleaned``: the beats went through them already).
 
     From the beats' source timestamps, so beats found by different windows join into one series.
     Returns the values and the NaN reasons.
@@ -265,6 +325,11 @@ def hrv_frequency_of_beats(beat_times: np.ndarray, seconds: float) -> tuple[dict
     if beats.shape[0] < 5:
         reason = f"only {beats.shape[0]} beat(s) in the {seconds:g} s HRV window"
         return values, dict.fromkeys(FREQUENCY_SCALARS, reason)
+    if not cleaned:
+        result = clean_beats(beats, max_gap, max_corrected_fraction, origin=float(beats[0]))
+        if result.hrv_reason is not None:
+            return values, dict.fromkeys(FREQUENCY_SCALARS, f"HRV window: {result.hrv_reason}")
+        beats = result.runs[0]
     try:
         powers = hrv.band_powers(beats)
     except ValueError as exc:

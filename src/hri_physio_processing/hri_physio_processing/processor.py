@@ -291,7 +291,8 @@ class NeurokitProcessor:
         del self._beats[:first]  # older beats never fall inside a later long window
         beats = np.asarray(self._beats)
         if res.ok:
-            values, reasons = hrv_frequency_of_beats(beats, seconds)
+            values, reasons = hrv_frequency_of_beats(beats, seconds, self.settings.max_beat_gap_seconds,
+                                                     self.settings.max_corrected_fraction)
             for key in FREQUENCY_SCALARS:
                 res.scalars[key] = values[key]
                 if key in reasons:
@@ -404,6 +405,7 @@ class NeurokitProcessor:
             "nan": dict(res.nan_reasons),
             "features": {k: (v if math.isfinite(v) else None) for k, v in res.scalars.items()},
             "peaks_in_window": int(res.peaks.shape[0]),
+            "beats": dict(res.beats),
             "peaks_published": int(peaks.shape[0]),
             "duplicates_dropped": dups,
             "lead_in_samples": view.offset,
