@@ -241,7 +241,13 @@ def _heart(clean: np.ndarray, peaks: np.ndarray, quality: Callable[[], float],
     beats = clean_beats(peaks / float(cfg.sampling_rate), cfg.max_beat_gap_seconds,
                         cfg.max_corrected_fraction)
     res.beats = beats.as_status()
-    hr, regular = robust_rate(beats.nn_ms)
+    if cfg.mode == "ppg":  # pulse peaks: spurious and missed ones are common; the regular intervals
+        hr, regular = robust_rate(beats.nn_ms)
+    else:  # R-peaks: every detected interval is a heartbeat (premature beats too), stretches left out
+        rr = np.diff(peaks) / float(cfg.sampling_rate) * 1000.0
+        rr = rr[rr <= 1000.0 * cfg.max_beat_gap_seconds]
+        hr = float(np.mean(60000.0 / rr)) if rr.shape[0] else math.nan
+        regular = robust_rate(beats.nn_ms)[1]
     res.beats["regular_fraction"] = round(regular, 4) if math.isfinite(regular) else None
     res.scalars["hr"] = hr
     hrv_reason = beats.hrv_reason
@@ -285,7 +291,8 @@ def _heart(clean: np.ndarray, peaks: np.ndarray, quality: Callable[[], float],
 
 
 def robust_rate(nn_ms: np.ndarray) -> tuple[float, float]:
-    """Heart rate (bpm) from clean NN intervals, and the share of them it rests on.
+    """PPG heart rate (bpm) from clean NN intervals, and the share of them it rests on (the share of
+    regular intervals, which the rate check uses in both modes).
 
     The mean instantaneous rate (60000 / NN, averaged over intervals, as pyhrv and hrv-analysis
     define mean HR) of the intervals within ``REGULAR_TOLERANCE`` of their median: without the
