@@ -31,6 +31,10 @@ SEGMENT_SECONDS = 120.0
 LF_BAND = (0.04, 0.15)
 HF_BAND = (0.15, 0.40)
 NO_POWER = 1e-6  # ms^2; below it LF + HF is rounding noise of constant intervals
+#: The frequency-domain method in one sentence (reports print it next to the numbers).
+METHOD = ("Task Force (1996): NN intervals (artefact-corrected, Lipponen & Tarvainen 2019) resampled at "
+          "4 Hz by a cubic spline, Welch's method (Hann, ~120 s segments overlapping >= 50 % and tiling "
+          "the whole window), LF 0.04-0.15 Hz and HF 0.15-0.40 Hz in ms^2")
 #: Keys of :func:`band_powers`.
 FREQUENCY_KEYS = ("lf", "hf", "lfhf", "lfnu", "hfnu")
 #: Keys of :func:`time_domain`.

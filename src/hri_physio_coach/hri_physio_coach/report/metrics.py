@@ -17,6 +17,7 @@ import numpy as np
 
 from hri_physio_coach.report.bagdata import BagTables, FrameStream
 from hri_physio_coach.report.timeline import EXERCISE_KINDS, RuleOutcome, SessionClock, Timeline
+from hri_physio_processing.hrv import METHOD as HRV_METHOD
 
 HR_CHANNELS = ("hr", "bpm", "heart_rate")
 FLAG_CHANNEL = "flag"
@@ -159,6 +160,7 @@ def compute(tables: BagTables, timeline: Timeline, clock: SessionClock,
         "receivers": _receivers(tables),
         "recorder_lost_messages": tables.custom_data.get("lost_messages"),
         "hrv": hrv_summary(tables),
+        "hrv_method": hrv_method(tables),
     }
     if hr is not None:
         in_session = (hr.t >= timeline.t0) & (hr.t <= timeline.end)
@@ -292,6 +294,25 @@ def hrv_summary(tables: BagTables) -> dict[str, Any]:
         if not finite.size and reason:
             out[topic]["nan_reason"] = reason
     return out
+
+
+def hrv_method(tables: BagTables) -> dict[str, Any]:
+    """How the processor computed LF, HF, LF/HF, and over how long a window (its status says).
+
+    ``window_seconds``: the longest ``hrv_window`` any status reported (the configured
+    ``hrv_window_seconds`` once the beat series is that long); None for LF/HF on each window itself.
+    """
+    seconds = [float(m.data["hrv_window"]["seconds"]) for topic, msgs in tables.json.items()
+               if topic.startswith("/physio/") for m in msgs
+               if isinstance(m.data.get("hrv_window"), dict) and m.data["hrv_window"].get("seconds")]
+    return {"method": HRV_METHOD, "window_seconds": _clean(max(seconds), 1) if seconds else None}
+
+
+def hrv_method_text(method: dict[str, Any]) -> str:
+    window = method.get("window_seconds")
+    where = (f"over the last {window:g} s of clean beats before each window's end" if window
+             else "over each processing window")
+    return f"{method['method']}; {where}."
 
 
 def _nan_reason(tables: BagTables, topic: str) -> str | None:
