@@ -99,6 +99,10 @@ class WindowResult:
     flags: list[Flag] = field(default_factory=list)
     processed: bool = False  # NeuroKit2 ran on this window
     beats: dict[str, object] = field(default_factory=dict)  # artefact counts (ECG/PPG), for the status
+    #: ECG/PPG: the beats after the artefact step (sample positions into the window, fractional), and
+    #: why they are unfit for HRV (None: fit). The processor's long HRV window is built from them.
+    nn_beats: np.ndarray | None = None
+    hrv_reason: str | None = None
 
     @property
     def ok(self) -> bool:
@@ -267,6 +271,8 @@ def _heart(clean: np.ndarray, peaks: np.ndarray, quality: Callable[[], float],
                           f"the median by more than {REGULAR_TOLERANCE:.0%}, of {beats.beats} beats (more "
                           f"than max_corrected_fraction {cfg.max_corrected_fraction:.0%}): artefacts left, "
                           "HRV would be inflated")
+    res.nn_beats = np.concatenate(beats.runs) * float(cfg.sampling_rate)
+    res.hrv_reason = hrv_reason
     if hrv_reason is not None:
         for key in hrv.TIME_KEYS:
             res.scalars[key] = math.nan
@@ -319,7 +325,8 @@ def hrv_frequency_of_beats(beat_times: np.ndarray, seconds: float, max_gap: floa
                            cleaned: bool = False) -> tuple[dict[str, float], dict[str, str]]:
     """LF, HF (ms^2), LF/HF, LFnu, HFnu of a run of beats (times in s, no gap between them) spanning
     ``seconds``, by :func:`hrv.band_powers`, after the artefact steps of :func:`artifacts.clean_beats`
-    (unless ``cleaned``: the beats went through them already).
+    (unless ``cleaned``: the beats went through them already, window by window; then only a
+    beat-free stretch is checked for).
 
     From the beats' source timestamps, so beats found by different windows join into one series.
     Returns the values and the NaN reasons.
@@ -337,6 +344,9 @@ def hrv_frequency_of_beats(beat_times: np.ndarray, seconds: float, max_gap: floa
         if result.hrv_reason is not None:
             return values, dict.fromkeys(FREQUENCY_SCALARS, f"HRV window: {result.hrv_reason}")
         beats = result.runs[0]
+    elif float(np.max(np.diff(beats))) > max_gap:
+        reason = f"HRV window: a beat-free stretch longer than {max_gap:g} s inside"
+        return values, dict.fromkeys(FREQUENCY_SCALARS, reason)
     try:
         powers = hrv.band_powers(beats)
     except ValueError as exc:
