@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from hri_physio_bridge.frames import Frame
+from hri_physio_processing import hrv
 from hri_physio_processing.config import ProcessorConfig
 from hri_physio_processing.features import (
     FREQUENCY_SCALARS,
@@ -424,6 +425,7 @@ class NeurokitProcessor:
             "features": {k: (v if math.isfinite(v) else None) for k, v in res.scalars.items()},
             "peaks_in_window": int(res.peaks.shape[0]),
             "beats": dict(res.beats),
+            **({"hrv_method": hrv.METHOD} if "lf" in SCALARS[self.cfg.mode] else {}),
             "peaks_published": int(peaks.shape[0]),
             "duplicates_dropped": dups,
             "lead_in_samples": view.offset,

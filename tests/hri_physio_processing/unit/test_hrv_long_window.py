@@ -25,6 +25,7 @@ from helpers.processing import (
     run_processor,
     statuses,
 )
+from hri_physio_processing import hrv
 from hri_physio_processing.config import ProcessorConfig
 from hri_physio_processing.features import hrv_frequency_of_beats
 
@@ -59,6 +60,7 @@ def test_lf_hf_lfhf_after_their_minimum_durations_equal_the_reference(ecg_hrv) -
     for k, st in enumerate(wins):
         h = st["hrv_window"]
         assert st["ok"] and h["t_start"] is not None
+        assert st["hrv_method"] == hrv.METHOD  # the report prints it beside the numbers
         # The long window ends where this window's published part ends, and its values are stamped there.
         assert h["t_end"] == st["published"]["t_end"] <= st["t"]
         assert h["seconds"] == pytest.approx(min(300.0, h["t_end"] - T0))

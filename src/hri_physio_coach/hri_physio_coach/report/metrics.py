@@ -17,7 +17,6 @@ import numpy as np
 
 from hri_physio_coach.report.bagdata import BagTables, FrameStream
 from hri_physio_coach.report.timeline import EXERCISE_KINDS, RuleOutcome, SessionClock, Timeline
-from hri_physio_processing.hrv import METHOD as HRV_METHOD
 
 HR_CHANNELS = ("hr", "bpm", "heart_rate")
 FLAG_CHANNEL = "flag"
@@ -297,22 +296,33 @@ def hrv_summary(tables: BagTables) -> dict[str, Any]:
 
 
 def hrv_method(tables: BagTables) -> dict[str, Any]:
-    """How the processor computed LF, HF, LF/HF, and over how long a window (its status says).
+    """How the processor computed LF, HF, LF/HF, and over how long a window: what its status says.
 
-    ``window_seconds``: the longest ``hrv_window`` any status reported (the configured
-    ``hrv_window_seconds`` once the beat series is that long); None for LF/HF on each window itself.
+    ``method``: the processor's ``hrv_method`` sentence (None from a processor that did not publish
+    one: before it computed LF and HF in ms^2). ``window_seconds``: the longest ``hrv_window`` any
+    status reported (the configured ``hrv_window_seconds`` once the beat series is that long); None
+    for LF/HF on each window itself.
     """
-    seconds = [float(m.data["hrv_window"]["seconds"]) for topic, msgs in tables.json.items()
-               if topic.startswith("/physio/") for m in msgs
-               if isinstance(m.data.get("hrv_window"), dict) and m.data["hrv_window"].get("seconds")]
-    return {"method": HRV_METHOD, "window_seconds": _clean(max(seconds), 1) if seconds else None}
+    method, seconds = None, []
+    for topic, msgs in tables.json.items():
+        if not topic.startswith("/physio/"):
+            continue
+        for m in msgs:
+            if isinstance(m.data.get("hrv_method"), str):
+                method = m.data["hrv_method"]
+            window = m.data.get("hrv_window")
+            if isinstance(window, dict) and window.get("seconds"):
+                seconds.append(float(window["seconds"]))
+    return {"method": method, "window_seconds": _clean(max(seconds), 1) if seconds else None}
 
 
 def hrv_method_text(method: dict[str, Any]) -> str:
     window = method.get("window_seconds")
     where = (f"over the last {window:g} s of clean beats before each window's end" if window
              else "over each processing window")
-    return f"{method['method']}; {where}."
+    how = method.get("method") or ("method not in the recording (a processor before LF and HF in ms^2: "
+                                    "NeuroKit2's hrv_frequency, scaled to its maximum)")
+    return f"{how}; {where}."
 
 
 def _nan_reason(tables: BagTables, topic: str) -> str | None:

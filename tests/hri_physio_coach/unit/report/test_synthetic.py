@@ -116,7 +116,8 @@ def session(*, clock: bool = True, stop_at: float | None = None, policy: str = "
                       frame_msg(np.array([1000.0 + t]), np.array([value]), (feature,)))
             status = {"t": 1000.0 + t, "event": "window", "ok": True, "flags": [],
                       "nan": {"lfhf": "window 60 s shorter than the 300 s LFHF needs"},
-                      "hrv_window": {"t_start": 1000.0, "t_end": 1000.0 + t, "seconds": t, "beats": 80}}
+                      "hrv_window": {"t_start": 1000.0, "t_end": 1000.0 + t, "seconds": t, "beats": 80},
+                      "hrv_method": "Task Force (1996): Welch, LF 0.04-0.15 Hz and HF 0.15-0.40 Hz in ms^2"}
             b.add(f"{topics.POLAR_H10_ECG}/status", "std_msgs/msg/String", wall(t + 40),
                   string_msg(json.dumps(status)))
     return b
