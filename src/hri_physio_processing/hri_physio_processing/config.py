@@ -84,9 +84,9 @@ class ProcessorConfig(NodeConfig):
     max_corrected_fraction: float = option(0.1, "more beats than this share corrected as artefacts "
                                            "(missed, extra, ectopic; Lipponen & Tarvainen 2019): HRV NaN",
                                            ge=0, le=1)
-    min_regular_fraction: float = option(0.8, "fewer clean inter-beat intervals than this share within 20 "
-                                         "percent of their median: rate and HRV NaN (noise or irregular "
-                                         "rhythm; 0 = never)", ge=0, le=1)
+    min_regular_fraction: float = option(0.8, "PPG: fewer clean inter-beat intervals than this share "
+                                         "within 20 percent of their median: rate and HRV NaN (noise or "
+                                         "irregular rhythm; 0 = never)", ge=0, le=1)
     resolve_timeout: float = option(10.0, "how long one attempt waits for an LSL input to appear; "
                                     "attempts repeat (with backoff) until it does", unit="s", ge=0)
     drain_timeout: float = option(5.0, "at a stop, the most time spent processing the frames already "

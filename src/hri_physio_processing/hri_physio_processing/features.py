@@ -257,13 +257,15 @@ def _heart(clean: np.ndarray, peaks: np.ndarray, quality: Callable[[], float],
     hrv_reason = beats.hrv_reason
     if not math.isfinite(hr):
         res.nan_reasons["hr"] = hrv_reason = "no inter-beat interval left after the artefact checks"
-    elif regular < cfg.min_regular_fraction:
+    elif cfg.mode == "ppg" and regular < cfg.min_regular_fraction:
+        # (ECG keeps its rate: an irregular rhythm of trusted R-peaks, atrial fibrillation say, still
+        # has one; noise there is the quality check's. Its HRV is NaN by the rule below.)
         hrv_reason = (f"only {regular:.0%} of the clean inter-beat intervals within "
                       f"{REGULAR_TOLERANCE:.0%} of their median (min_regular_fraction "
                       f"{cfg.min_regular_fraction:.0%}): noise or an irregular rhythm, no trusted rate")
         res.scalars["hr"] = math.nan
         res.nan_reasons["hr"] = hrv_reason
-    elif hrv_reason is None:
+    if hrv_reason is None:
         irregular = round((1.0 - regular) * beats.nn_ms.shape[0])
         if beats.corrected_beats + irregular > cfg.max_corrected_fraction * beats.beats:
             # the correction did not catch them all (its thresholds adapt to a contaminated series)

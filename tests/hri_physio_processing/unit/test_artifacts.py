@@ -135,3 +135,21 @@ def test_robust_rate_ignores_a_left_over_extra_beat() -> None:
     assert rate == pytest.approx(60.0, abs=0.01) and regular == pytest.approx(58 / 60)
     assert np.mean(60000.0 / nn) > 62.0  # a plain mean of instantaneous rates is pulled up
     assert all(math.isnan(v) for v in robust_rate(np.empty(0)))
+
+
+def test_an_irregular_rhythm_keeps_its_ecg_rate_but_no_hrv() -> None:
+    """Atrial-fibrillation-like intervals (uniform 0.45-1.05 s): R-peaks are trusted, so the ECG rate
+    stays (every interval counts); PPG gives no rate; HRV is NaN in both."""
+    from hri_physio_processing.features import FeatureSettings, _heart
+
+    rr = np.random.default_rng(7).uniform(0.45, 1.05, 80)
+    peaks = np.rint(np.cumsum(rr) * FS).astype(np.int64)
+    for mode in ("ecg", "ppg"):
+        res = _heart(np.zeros(peaks[-1] + FS), peaks, lambda: math.nan,
+                     FeatureSettings(mode=mode, quality_method="none"))
+        assert math.isnan(res.scalars["sdnn"]) and res.nan_reasons["sdnn"]
+        if mode == "ecg":
+            want = np.mean(60.0 / (np.diff(peaks) / FS))
+            assert res.scalars["hr"] == pytest.approx(want, rel=1e-9)
+        else:
+            assert math.isnan(res.scalars["hr"]) and "no trusted rate" in res.nan_reasons["hr"]
