@@ -93,3 +93,25 @@ def mean_rate(nn_ms: np.ndarray, tolerance: float = 0.2) -> float:
     nn = np.asarray(nn_ms, dtype=np.float64)
     med = np.median(nn)
     return float(np.mean(60000.0 / nn[np.abs(nn - med) <= tolerance * med]))
+
+
+def lomb_band_powers(rr_ms: np.ndarray, beat_times: np.ndarray) -> dict[str, float]:
+    """LF, HF (ms^2) from the classic Lomb (1976) / Scargle (1982) periodogram, written out with its
+    time offset tau, of the NN intervals (mean removed) at the beats that end them; one-sided density
+    scaled by 2 T / N so a sinusoid's band power is its variance; bands summed on the Welch grid."""
+    t = np.asarray(beat_times, dtype=np.float64)[1:]
+    t = t - t[0]
+    y = np.asarray(rr_ms, dtype=np.float64)
+    y = y - y.mean()
+    f = np.arange(NFFT // 2 + 1) * FS / NFFT
+    p = np.zeros_like(f)
+    for k in range(1, f.shape[0]):
+        w = 2.0 * np.pi * f[k]
+        tau = np.arctan2(np.sum(np.sin(2 * w * t)), np.sum(np.cos(2 * w * t))) / (2 * w)
+        c, s = np.cos(w * (t - tau)), np.sin(w * (t - tau))
+        p[k] = 0.5 * ((y @ c) ** 2 / (c @ c) + (y @ s) ** 2 / (s @ s))
+    p *= 2.0 * t[-1] / t.shape[0]
+    df = f[1] - f[0]
+    lf = float(p[(f >= LF_BAND[0]) & (f < LF_BAND[1])].sum() * df)
+    hf = float(p[(f >= HF_BAND[0]) & (f < HF_BAND[1])].sum() * df)
+    return {"lf": lf, "hf": hf, "lfhf": lf / hf}

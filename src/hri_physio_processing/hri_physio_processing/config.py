@@ -87,6 +87,9 @@ class ProcessorConfig(NodeConfig):
     min_regular_fraction: float = option(0.8, "PPG: fewer clean inter-beat intervals than this share "
                                          "within 20 percent of their median: rate and HRV NaN (noise or "
                                          "irregular rhythm; 0 = never)", ge=0, le=1)
+    hrv_spectrum: Literal["welch", "lomb"] = option("welch", "LF, HF by Welch's method on the NN series "
+                                                     "resampled at 4 Hz (cubic), or by the Lomb-Scargle "
+                                                     "periodogram of the NN intervals at their beat times")
     resolve_timeout: float = option(10.0, "how long one attempt waits for an LSL input to appear; "
                                     "attempts repeat (with backoff) until it does", unit="s", ge=0)
     drain_timeout: float = option(5.0, "at a stop, the most time spent processing the frames already "

@@ -77,6 +77,7 @@ class FeatureSettings:
     max_beat_gap_seconds: float = 2.0  # a longer interval is a beat-free stretch, not a heartbeat
     max_corrected_fraction: float = 0.1  # more corrected beats: HRV NaN
     min_regular_fraction: float = 0.8  # fewer regular intervals: rate and HRV NaN
+    hrv_spectrum: str = "welch"  # or "lomb" (hrv.band_powers)
     frequency_domain: bool = True  # LF, HF, LF/HF on the window itself (off: the caller's long window)
 
     @property
@@ -289,7 +290,8 @@ def _heart(clean: np.ndarray, peaks: np.ndarray, quality: Callable[[], float],
             for key in FREQUENCY_SCALARS:
                 res.nan_reasons[key] = "computed on the long HRV window (hrv_window_seconds), not per window"
         else:
-            values, reasons = hrv_frequency_of_beats(beats.runs[0], duration, cleaned=True)
+            values, reasons = hrv_frequency_of_beats(beats.runs[0], duration, cleaned=True,
+                                                     spectrum=cfg.hrv_spectrum)
             res.scalars.update(values)
             res.nan_reasons.update(reasons)
     for key, value in res.scalars.items():
@@ -323,8 +325,8 @@ def _too_short(seconds: float, what: str) -> dict[str, str]:
 
 
 def hrv_frequency_of_beats(beat_times: np.ndarray, seconds: float, max_gap: float = 2.0,
-                           max_corrected_fraction: float = 0.1,
-                           cleaned: bool = False) -> tuple[dict[str, float], dict[str, str]]:
+                           max_corrected_fraction: float = 0.1, cleaned: bool = False,
+                           spectrum: str = "welch") -> tuple[dict[str, float], dict[str, str]]:
     """LF, HF (ms^2), LF/HF, LFnu, HFnu of a run of beats (times in s, no gap between them) spanning
     ``seconds``, by :func:`hrv.band_powers`, after the artefact steps of :func:`artifacts.clean_beats`
     (unless ``cleaned``: the beats went through them already, window by window; then only a
@@ -350,7 +352,7 @@ def hrv_frequency_of_beats(beat_times: np.ndarray, seconds: float, max_gap: floa
         reason = f"HRV window: a beat-free stretch longer than {max_gap:g} s inside"
         return values, dict.fromkeys(FREQUENCY_SCALARS, reason)
     try:
-        powers = hrv.band_powers(beats)
+        powers = hrv.band_powers(beats, spectrum=spectrum)
     except ValueError as exc:
         reason = f"{exc} (in the {seconds:g} s HRV window)"
         return values, dict.fromkeys(FREQUENCY_SCALARS, reason)

@@ -295,7 +295,7 @@ class NeurokitProcessor:
         beats = np.asarray(self._beats)
         if res.ok:
             values, reasons = hrv_frequency_of_beats(beats, seconds, self.settings.max_beat_gap_seconds,
-                                                     cleaned=True)
+                                                     cleaned=True, spectrum=self.settings.hrv_spectrum)
             for key in FREQUENCY_SCALARS:
                 res.scalars[key] = values[key]
                 if key in reasons:
@@ -425,7 +425,8 @@ class NeurokitProcessor:
             "features": {k: (v if math.isfinite(v) else None) for k, v in res.scalars.items()},
             "peaks_in_window": int(res.peaks.shape[0]),
             "beats": dict(res.beats),
-            **({"hrv_method": hrv.METHOD} if "lf" in SCALARS[self.cfg.mode] else {}),
+            **({"hrv_method": hrv.METHODS[self.settings.hrv_spectrum]} if "lf" in SCALARS[self.cfg.mode]
+               else {}),
             "peaks_published": int(peaks.shape[0]),
             "duplicates_dropped": dups,
             "lead_in_samples": view.offset,

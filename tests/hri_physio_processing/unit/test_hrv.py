@@ -120,3 +120,45 @@ def test_bad_input_gives_nan_with_a_reason() -> None:
     assert all(math.isnan(v) for v in values.values()) and "no power" in reasons["hf"]
     with pytest.raises(ValueError, match="too few"):
         hrv.band_powers(np.array([0.0, 1.0]))
+
+
+def test_lomb_scargle_option_equals_the_written_out_periodogram(long_series) -> None:
+    for b in windows(long_series, 300.0, 700.0)[:4]:
+        got = hrv.band_powers(b, spectrum="lomb")
+        want = ref.lomb_band_powers(np.diff(b) * 1000.0, b)
+        for key in ("lf", "hf", "lfhf"):
+            assert got[key] == pytest.approx(want[key], rel=0.02), key
+        # the same bands, a different estimator: of the order of Welch's
+        welch = hrv.band_powers(b)
+        assert 0.5 < got["lf"] / welch["lf"] < 2.0 and 0.5 < got["hf"] / welch["hf"] < 2.0
+
+
+@pytest.mark.parametrize("spectrum", hrv.SPECTRA)
+def test_a_sinusoid_has_its_variance_as_band_power(spectrum: str) -> None:
+    """NN = 800 ms +- 30 ms at 0.1 Hz for 5 min: LF = 30^2 / 2 = 450 ms^2, HF about 0."""
+    t = np.cumsum(np.full(380, 0.8))
+    nn = 800.0 + 30.0 * np.sin(2 * np.pi * 0.1 * t)
+    got = hrv.band_powers(beats_of(nn), spectrum=spectrum)
+    assert got["lf"] == pytest.approx(450.0, rel=0.02) and got["hf"] < 5.0
+    with pytest.raises(ValueError, match="unknown spectrum"):
+        hrv.band_powers(beats_of(nn), spectrum="fft")
+
+
+def test_window_features_use_the_lomb_option(long_series) -> None:
+    from hri_physio_processing.features import FeatureSettings, _heart
+
+    b = windows(long_series, 300.0, 300.0)[2]
+    fs = 130.0
+    peaks = np.rint((b - b[0] + 1.0) * fs).astype(np.int64)
+    res = _heart(np.zeros(peaks[-1] + int(fs)), peaks, lambda: math.nan,
+                 FeatureSettings(quality_method="none", hrv_spectrum="lomb", frequency_domain=True,
+                                 max_corrected_fraction=1.0))
+    beats, _ = nk_corrected_beats_at(peaks, fs)
+    want = ref.lomb_band_powers(np.diff(beats) * 1000.0, beats)
+    assert res.scalars["lf"] == pytest.approx(want["lf"], rel=0.02)
+
+
+def nk_corrected_beats_at(peaks: np.ndarray, fs: float) -> tuple[np.ndarray, int]:
+    from helpers.processing import nk_corrected_times
+
+    return nk_corrected_times(peaks / fs)
