@@ -10,6 +10,7 @@ from typing import Any
 import neurokit2 as nk
 import numpy as np
 
+from helpers import hrv_reference
 from hri_physio_bridge.frames import Frame
 from hri_physio_processing.config import ProcessorConfig
 from hri_physio_processing.features import HEART_SCALARS, SIGNAL_FEATURES
@@ -81,22 +82,41 @@ OUTPUTS = (*SIGNAL_FEATURES["ecg"], *HEART_SCALARS)
 
 
 def nk_direct_ecg(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
-    """The reference: NeuroKit2's functions called by hand, as a user would."""
+    """The reference: NeuroKit2's cleaning, peaks, quality and artefact correction (``signal_fixpeaks``,
+    Lipponen & Tarvainen 2019, its own iterative loop) called by hand, as a user would; rate and HRV
+    by the definitions (``helpers.hrv_reference``). ``corrected``: beats moved, removed or inserted."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         clean = nk.ecg_clean(x, sampling_rate=FS)
         _, info = nk.ecg_peaks(clean, sampling_rate=FS)
-        peaks = info["ECG_R_Peaks"]
-        feats = {
-            "hr": float(np.mean(nk.signal_rate(peaks, sampling_rate=FS, desired_length=len(x)))),
-            "quality": float(np.mean(nk.ecg_quality(clean, rpeaks=peaks, sampling_rate=FS,
-                                                    method="templatematch"))),
-        }
-        td = nk.hrv_time(peaks, sampling_rate=FS)
-        fd = nk.hrv_frequency(peaks, sampling_rate=FS)
-    feats.update(sdnn=td["HRV_SDNN"][0], rmssd=td["HRV_RMSSD"][0], pnn50=td["HRV_pNN50"][0],
-                 lf=fd["HRV_LF"][0], hf=fd["HRV_HF"][0], lfhf=fd["HRV_LFHF"][0])
-    return clean, np.asarray(peaks), feats
+        peaks = np.asarray(info["ECG_R_Peaks"])
+        feats = {"quality": float(np.mean(nk.ecg_quality(clean, rpeaks=peaks, sampling_rate=FS,
+                                                         method="templatematch")))}
+    beats, corrected = nk_corrected_beats(peaks)
+    feats["corrected"] = float(corrected)
+    nn = np.diff(beats) * 1000.0
+    feats["hr"] = float(np.mean(60000.0 / np.diff(peaks / FS * 1000.0)))  # ECG: every detected interval
+    feats.update(hrv_reference.time_domain(nn))
+    feats.update(hrv_reference.band_powers(nn, beat_times=beats))
+    return clean, peaks, feats
+
+
+def nk_corrected_beats(peaks: np.ndarray) -> tuple[np.ndarray, int]:
+    """Beat times (s) of peak indices at ``FS`` after NeuroKit2's artefact correction (see below)."""
+    return nk_corrected_times(np.asarray(peaks) / FS)
+
+
+def nk_corrected_times(times: np.ndarray) -> tuple[np.ndarray, int]:
+    """Beat times (s) after NeuroKit2's ``signal_fixpeaks`` (kubios, iterative) on microseconds from the
+    first beat, and how many beats it moved, removed or inserted."""
+    times = np.asarray(times, dtype=np.float64)
+    us = np.rint((times - times[0]) * 1e6).astype(np.int64)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        _, fixed = nk.signal_fixpeaks(us, sampling_rate=1_000_000, method="kubios", iterative=True)
+    fixed = np.unique(np.asarray(fixed, dtype=np.int64))
+    corrected = max(np.setdiff1d(us, fixed).shape[0], np.setdiff1d(fixed, us).shape[0])
+    return (times[0] + fixed / 1e6 if corrected else times), corrected
 
 
 class Outputs:

@@ -20,7 +20,9 @@ from hri_physio_processing.features import FeatureSettings
 #: Per-mode defaults for options left at 0 ("auto").
 MODE_DEFAULTS: dict[str, dict[str, float]] = {
     "ecg": {"flatline_seconds": 2.0, "saturation_fraction": 0.01, "dedup_seconds": 0.2},
-    "ppg": {"flatline_seconds": 2.0, "saturation_fraction": 0.01, "dedup_seconds": 0.2},
+    # Optical sensors clip systolic peaks and troughs routinely without losing the beats' timing; a
+    # clipped stretch that hides beats is caught as a beat-free stretch (max_beat_gap_seconds).
+    "ppg": {"flatline_seconds": 2.0, "saturation_fraction": 0.05, "dedup_seconds": 0.2},
     # Skin conductance can sit still for seconds and plateau at its peaks.
     "eda": {"flatline_seconds": 10.0, "saturation_fraction": 0.05, "dedup_seconds": 1.0},
 }
@@ -62,7 +64,8 @@ class ProcessorConfig(NodeConfig):
     flatline_seconds: float = option(0.0, "a constant stretch this long flags the window (0 = mode "
                                      "default: 2 s ECG/PPG, 10 s EDA)", unit="s", ge=0)
     saturation_fraction: float = option(0.0, "this share of samples at the extremes flags the window "
-                                        "(0 = mode default: 1 percent ECG/PPG, 5 percent EDA)", ge=0, le=1)
+                                        "(0 = mode default: 1 percent ECG, 5 percent PPG and EDA)",
+                                        ge=0, le=1)
     rate_tolerance: float = option(0.05, "relative mismatch between timestamps and sampling_rate that "
                                    "flags a window", gt=0, lt=1)
     gap_factor: float = option(1.5, "timestamp step (in sample periods) that counts as a gap and restarts "
@@ -75,6 +78,18 @@ class ProcessorConfig(NodeConfig):
                                   "(0 = mode default: 0.2 s ECG/PPG, 1 s EDA)", unit="s", ge=0)
     correct_artifacts: bool = option(False, "let NeuroKit2 correct R-peak artefacts "
                                      "(ecg_peaks correct_artifacts)")
+    max_beat_gap_seconds: float = option(2.0, "an interval between beats longer than this is a beat-free "
+                                         "stretch (saturation, flat line, baseline jump): left out of the "
+                                         "rate, and the window's HRV is NaN", unit="s", gt=0)
+    max_corrected_fraction: float = option(0.1, "more beats than this share corrected as artefacts "
+                                           "(missed, extra, ectopic; Lipponen & Tarvainen 2019): HRV NaN",
+                                           ge=0, le=1)
+    min_regular_fraction: float = option(0.8, "PPG: fewer clean inter-beat intervals than this share "
+                                         "within 20 percent of their median: rate and HRV NaN (noise or "
+                                         "irregular rhythm; 0 = never)", ge=0, le=1)
+    hrv_spectrum: Literal["welch", "lomb"] = option("welch", "LF, HF by Welch's method on the NN series "
+                                                     "resampled at 4 Hz (cubic), or by the Lomb-Scargle "
+                                                     "periodogram of the NN intervals at their beat times")
     resolve_timeout: float = option(10.0, "how long one attempt waits for an LSL input to appear; "
                                     "attempts repeat (with backoff) until it does", unit="s", ge=0)
     drain_timeout: float = option(5.0, "at a stop, the most time spent processing the frames already "

@@ -9,8 +9,11 @@ with a reason (``WindowResult.nan_reasons``), never a silent 0. Window-level pro
 * after it ran: mean rate outside [min_hr, max_hr] or signal quality below ``min_quality``
   (noise that is not ECG/PPG still yields "peaks"; these two catch it).
 
-Window-length rules for frequency-domain HRV follow NeuroKit2's guidance: HF needs at
-least 1 min, LF 2 min and LF/HF 5 min of signal; shorter windows give NaN with the reason.
+HRV is computed from the beats by :mod:`hrv` (Task Force 1996 definitions; LF and HF in ms^2
+by Welch over the whole run of beats), not by NeuroKit2's ``hrv_time``/``hrv_frequency``.
+Window-length rules for frequency-domain HRV follow NeuroKit2's guidance: HF needs at least
+1 min, LF 2 min and LF/HF (and LFnu, HFnu, which are LF/HF in another form) 5 min of signal;
+shorter windows give NaN with the reason.
 With ``frequency_domain`` off, :func:`extract` leaves LF, HF and LF/HF to the caller, which
 computes them with :func:`hrv_frequency_of_beats` on a longer run of beats (the processor's
 ``hrv_window_seconds``).
@@ -25,12 +28,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hri_physio_processing import hrv
+from hri_physio_processing.artifacts import clean_beats
 from hri_physio_processing.quality import templatematch_quality
 from hri_physio_processing.signal_checks import Flag, check_rate, check_values
 
 MODES = ("ecg", "ppg", "eda")
 
-HEART_SCALARS = ("hr", "sdnn", "rmssd", "pnn50", "lf", "hf", "lfhf", "quality")
+HEART_SCALARS = ("hr", "sdnn", "rmssd", "pnn50", "pnn20", "lf", "hf", "lfhf", "lfnu", "hfnu", "quality")
 EDA_SCALARS = ("tonic", "scr_count", "scr_amplitude")
 SCALARS: dict[str, tuple[str, ...]] = {"ecg": HEART_SCALARS, "ppg": HEART_SCALARS, "eda": EDA_SCALARS}
 #: Name of the peak-mask output per mode.
@@ -43,9 +48,11 @@ SIGNAL_FEATURES: dict[str, tuple[str, ...]] = {
 }
 
 #: Minimum window length (s) for each frequency-domain HRV feature (NeuroKit2's guidance).
-MIN_SECONDS = {"hf": 60.0, "lf": 120.0, "lfhf": 300.0}
-FREQUENCY_SCALARS = ("lf", "hf", "lfhf")
-_NK_FREQUENCY_COLUMNS = {"lf": "HRV_LF", "hf": "HRV_HF", "lfhf": "HRV_LFHF"}
+MIN_SECONDS = {"hf": 60.0, "lf": 120.0, "lfhf": 300.0, "lfnu": 300.0, "hfnu": 300.0}
+FREQUENCY_SCALARS = hrv.FREQUENCY_KEYS
+
+#: Intervals within this fraction of the window's median count as regular (rate and its check).
+REGULAR_TOLERANCE = 0.2
 
 QUALITY_METHODS = ("templatematch", "averageQRS", "zhao2018", "none")
 #: zhao2018 answers with a category; published as a number.
@@ -67,6 +74,10 @@ class FeatureSettings:
     saturation_fraction: float = 0.01
     rate_tolerance: float = 0.05
     correct_artifacts: bool = False
+    max_beat_gap_seconds: float = 2.0  # a longer interval is a beat-free stretch, not a heartbeat
+    max_corrected_fraction: float = 0.1  # more corrected beats: HRV NaN
+    min_regular_fraction: float = 0.8  # fewer regular intervals: rate and HRV NaN
+    hrv_spectrum: str = "welch"  # or "lomb" (hrv.band_powers)
     frequency_domain: bool = True  # LF, HF, LF/HF on the window itself (off: the caller's long window)
 
     @property
@@ -88,6 +99,11 @@ class WindowResult:
     nan_reasons: dict[str, str] = field(default_factory=dict)
     flags: list[Flag] = field(default_factory=list)
     processed: bool = False  # NeuroKit2 ran on this window
+    beats: dict[str, object] = field(default_factory=dict)  # artefact counts (ECG/PPG), for the status
+    #: ECG/PPG: the beats after the artefact step (sample positions into the window, fractional), and
+    #: why they are unfit for HRV (None: fit). The processor's long HRV window is built from them.
+    nn_beats: np.ndarray | None = None
+    hrv_reason: str | None = None
 
     @property
     def ok(self) -> bool:
@@ -212,11 +228,12 @@ def _heart(clean: np.ndarray, peaks: np.ndarray, quality: Callable[[], float],
     if peaks.shape[0] < max(cfg.min_beats, 2):
         reason = f"only {peaks.shape[0]} beat(s) found, at least {max(cfg.min_beats, 2)} needed"
         return _nan_all(res, Flag("too_few_beats", reason))
-    res.scalars["hr"] = float(np.mean(nk.signal_rate(peaks, sampling_rate=fs, desired_length=n)))
+    # Plausibility on NeuroKit2's mean instantaneous rate of all peaks (noise yields "peaks" too);
+    # the published rate is the robust one below.
+    hr = float(np.mean(nk.signal_rate(peaks, sampling_rate=fs, desired_length=n)))
     res.scalars["quality"] = quality()
     if cfg.quality_method == "none":
         res.nan_reasons["quality"] = "quality_method is none"
-    hr = res.scalars["hr"]
     if not cfg.min_hr <= hr <= cfg.max_hr:
         return _nan_all(res, Flag(
             "implausible_rate",
@@ -226,24 +243,79 @@ def _heart(clean: np.ndarray, peaks: np.ndarray, quality: Callable[[], float],
     if math.isfinite(q) and q < cfg.min_quality:
         flag = Flag("low_quality", f"signal quality {q:.3f} below min_quality {cfg.min_quality:g}")
         return _nan_all(res, flag, keep=("quality",))
-    hrv_time = nk.hrv_time(peaks, sampling_rate=fs)
-    for key, col in (("sdnn", "HRV_SDNN"), ("rmssd", "HRV_RMSSD"), ("pnn50", "HRV_pNN50")):
-        res.scalars[key] = float(hrv_time[col].iloc[0])
-    if not cfg.frequency_domain:
-        for key in FREQUENCY_SCALARS:
-            res.nan_reasons[key] = "computed on the long HRV window (hrv_window_seconds), not per window"
-    else:
-        if duration >= min(MIN_SECONDS.values()):
-            hrv_freq = nk.hrv_frequency(peaks, sampling_rate=fs)
-            for key, col in _NK_FREQUENCY_COLUMNS.items():
-                res.scalars[key] = float(hrv_freq[col].iloc[0])
-        res.nan_reasons.update(_too_short(duration, "window"))
-        for key in res.nan_reasons.keys() & set(FREQUENCY_SCALARS):
+    beats = clean_beats(peaks / float(cfg.sampling_rate), cfg.max_beat_gap_seconds,
+                        cfg.max_corrected_fraction)
+    res.beats = beats.as_status()
+    if cfg.mode == "ppg":  # pulse peaks: spurious and missed ones are common; the regular intervals
+        hr, regular = robust_rate(beats.nn_ms)
+    else:  # R-peaks: every detected interval is a heartbeat (premature beats too), stretches left out
+        rr = np.diff(peaks) / float(cfg.sampling_rate) * 1000.0
+        rr = rr[rr <= 1000.0 * cfg.max_beat_gap_seconds]
+        hr = float(np.mean(60000.0 / rr)) if rr.shape[0] else math.nan
+        regular = robust_rate(beats.nn_ms)[1]
+    res.beats["regular_fraction"] = round(regular, 4) if math.isfinite(regular) else None
+    res.scalars["hr"] = hr
+    hrv_reason = beats.hrv_reason
+    if not math.isfinite(hr):
+        res.nan_reasons["hr"] = hrv_reason = "no inter-beat interval left after the artefact checks"
+    elif cfg.mode == "ppg" and regular < cfg.min_regular_fraction:
+        # (ECG keeps its rate: an irregular rhythm of trusted R-peaks, atrial fibrillation say, still
+        # has one; noise there is the quality check's. Its HRV is NaN by the rule below.)
+        hrv_reason = (f"only {regular:.0%} of the clean inter-beat intervals within "
+                      f"{REGULAR_TOLERANCE:.0%} of their median (min_regular_fraction "
+                      f"{cfg.min_regular_fraction:.0%}): noise or an irregular rhythm, no trusted rate")
+        res.scalars["hr"] = math.nan
+        res.nan_reasons["hr"] = hrv_reason
+    if hrv_reason is None:
+        irregular = round((1.0 - regular) * beats.nn_ms.shape[0])
+        if beats.corrected_beats + irregular > cfg.max_corrected_fraction * beats.beats:
+            # the correction did not catch them all (its thresholds adapt to a contaminated series)
+            hrv_reason = (f"{beats.corrected_beats} beat(s) corrected and {irregular} interval(s) still off "
+                          f"the median by more than {REGULAR_TOLERANCE:.0%}, of {beats.beats} beats (more "
+                          f"than max_corrected_fraction {cfg.max_corrected_fraction:.0%}): artefacts left, "
+                          "HRV would be inflated")
+    res.nn_beats = np.concatenate(beats.runs) * float(cfg.sampling_rate)
+    res.hrv_reason = hrv_reason
+    if hrv_reason is not None:
+        for key in hrv.TIME_KEYS:
             res.scalars[key] = math.nan
+            res.nan_reasons[key] = hrv_reason
+        short = _too_short(duration, "window") if cfg.frequency_domain else {}
+        for key in FREQUENCY_SCALARS:
+            res.scalars[key] = math.nan
+            res.nan_reasons[key] = short.get(key, hrv_reason)
+    else:
+        res.scalars.update(hrv.time_domain(beats.nn_ms))
+        if not cfg.frequency_domain:
+            for key in FREQUENCY_SCALARS:
+                res.nan_reasons[key] = "computed on the long HRV window (hrv_window_seconds), not per window"
+        else:
+            values, reasons = hrv_frequency_of_beats(beats.runs[0], duration, cleaned=True,
+                                                     spectrum=cfg.hrv_spectrum)
+            res.scalars.update(values)
+            res.nan_reasons.update(reasons)
     for key, value in res.scalars.items():
         if not math.isfinite(value) and key not in res.nan_reasons:
-            res.nan_reasons[key] = "NeuroKit2 returned NaN (too few or too irregular beats)"
+            res.nan_reasons[key] = "not computable from this window's beats (too few or too irregular)"
     return res
+
+
+def robust_rate(nn_ms: np.ndarray) -> tuple[float, float]:
+    """PPG heart rate (bpm) from clean NN intervals, and the share of them it rests on (the share of
+    regular intervals, which the rate check uses in both modes).
+
+    The mean instantaneous rate (60000 / NN, averaged over intervals, as pyhrv and hrv-analysis
+    define mean HR) of the intervals within ``REGULAR_TOLERANCE`` of their median: without the
+    spurious or missed beats the correction left (one extra PPG peak splits an interval into two
+    short ones and pulls a plain mean up by several bpm). In a rhythm with many premature beats the
+    ones the correction did not move are left out too, which lowers the rate slightly.
+    """
+    nn = np.asarray(nn_ms, dtype=np.float64)
+    if not nn.shape[0]:
+        return math.nan, math.nan
+    med = float(np.median(nn))
+    inside = nn[np.abs(nn - med) <= REGULAR_TOLERANCE * med]
+    return float(np.mean(60000.0 / inside)), inside.shape[0] / nn.shape[0]
 
 
 def _too_short(seconds: float, what: str) -> dict[str, str]:
@@ -252,36 +324,44 @@ def _too_short(seconds: float, what: str) -> dict[str, str]:
             for key, need in MIN_SECONDS.items() if seconds < need}
 
 
-def hrv_frequency_of_beats(beat_times: np.ndarray, seconds: float) -> tuple[dict[str, float], dict[str, str]]:
-    """LF, HF and LF/HF of a run of beats (times in s, no gap between them) spanning ``seconds``.
+def hrv_frequency_of_beats(beat_times: np.ndarray, seconds: float, max_gap: float = 2.0,
+                           max_corrected_fraction: float = 0.1, cleaned: bool = False,
+                           spectrum: str = "welch") -> tuple[dict[str, float], dict[str, str]]:
+    """LF, HF (ms^2), LF/HF, LFnu, HFnu of a run of beats (times in s, no gap between them) spanning
+    ``seconds``, by :func:`hrv.band_powers`, after the artefact steps of :func:`artifacts.clean_beats`
+    (unless ``cleaned``: the beats went through them already, window by window; then only a
+    beat-free stretch is checked for).
 
-    The RR series (ms) goes to NeuroKit2's ``hrv_frequency`` as ``{"RRI": ...}``: the same
-    computation as from R-peak indices, but from the beats' source timestamps, so beats found by
-    different windows join into one series. Returns the values and the NaN reasons.
+    From the beats' source timestamps, so beats found by different windows join into one series.
+    Returns the values and the NaN reasons.
     """
-    import neurokit2 as nk
-
     beats = np.asarray(beat_times, dtype=np.float64).reshape(-1)
     values = dict.fromkeys(FREQUENCY_SCALARS, math.nan)
     reasons = _too_short(seconds, "clean beat series of")
     if len(reasons) == len(FREQUENCY_SCALARS):
         return values, reasons
-    if beats.shape[0] < 3:
+    if beats.shape[0] < 5:
         reason = f"only {beats.shape[0]} beat(s) in the {seconds:g} s HRV window"
         return values, dict.fromkeys(FREQUENCY_SCALARS, reason)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            freq = nk.hrv_frequency({"RRI": np.diff(beats) * 1000.0})
-    except Exception as exc:  # NeuroKit2 raises many types on degenerate input
-        reason = f"NeuroKit2 failed: {type(exc).__name__}: {exc}"
+    if not cleaned:
+        result = clean_beats(beats, max_gap, max_corrected_fraction, origin=float(beats[0]))
+        if result.hrv_reason is not None:
+            return values, dict.fromkeys(FREQUENCY_SCALARS, f"HRV window: {result.hrv_reason}")
+        beats = result.runs[0]
+    elif float(np.max(np.diff(beats))) > max_gap:
+        reason = f"HRV window: a beat-free stretch longer than {max_gap:g} s inside"
         return values, dict.fromkeys(FREQUENCY_SCALARS, reason)
-    for key, col in _NK_FREQUENCY_COLUMNS.items():
+    try:
+        powers = hrv.band_powers(beats, spectrum=spectrum)
+    except ValueError as exc:
+        reason = f"{exc} (in the {seconds:g} s HRV window)"
+        return values, dict.fromkeys(FREQUENCY_SCALARS, reason)
+    for key in FREQUENCY_SCALARS:
         if key in reasons:
             continue
-        values[key] = float(freq[col].iloc[0])
+        values[key] = powers[key]
         if not math.isfinite(values[key]):
-            reasons[key] = "NeuroKit2 returned NaN (too few or too irregular beats)"
+            reasons[key] = "no power in the LF and HF bands (constant intervals?)"
     return values, reasons
 
 

@@ -21,10 +21,12 @@ the scalar features are always computed on the window alone.
 
 Frequency-domain HRV (LF, HF, LF/HF) needs 1 to 5 min of beats, longer than the default 60 s
 window. With ``hrv_window_seconds`` > 0 it is computed from the beats already published (each
-beat once, by source time) over the last ``hrv_window_seconds`` of clean signal ending at the
-window's published end, and stamped with that end: no second peak detection. The beat series
-restarts at a gap, a clock jump or a flagged window (no beats are trusted there), so HF appears
-1 min, LF 2 min and LF/HF 5 min after the last restart.
+beat once, by source time; after each window's artefact step, so corrected beats are corrected
+once) over the last ``hrv_window_seconds`` of clean signal ending at the window's published end,
+and stamped with that end: no second peak detection or correction. The beat series restarts at a
+gap, a clock jump, a flagged window (no beats are trusted there) or a window whose beats are unfit
+for HRV (a beat-free stretch, too many artefacts), so HF appears 1 min, LF 2 min and LF/HF 5 min
+after the last restart.
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from hri_physio_bridge.frames import Frame
+from hri_physio_processing import hrv
 from hri_physio_processing.config import ProcessorConfig
 from hri_physio_processing.features import (
     FREQUENCY_SCALARS,
@@ -251,7 +254,7 @@ class NeurokitProcessor:
         out, peaks, dups = self._publish_region(view, start, end)
         self._open = None if w.final or end == view.t.shape[0] else view
         t_end = w.t_end
-        hrv = self._long_window_hrv(view, start, end, peaks, res) if self.hrv_window > 0 else None
+        hrv = self._long_window_hrv(view, start, end, res) if self.hrv_window > 0 else None
         for name in SCALARS[self.cfg.mode]:
             value = res.scalars[name]
             stamp = hrv["t_end"] if hrv is not None and name in FREQUENCY_SCALARS else t_end
@@ -267,18 +270,18 @@ class NeurokitProcessor:
         self._beats.clear()
         self._clean_since = None
 
-    def _long_window_hrv(self, view: _View, start: int, end: int, peaks: np.ndarray,
+    def _long_window_hrv(self, view: _View, start: int, end: int,
                          res: WindowResult) -> dict[str, Any] | None:
         """Track the published beats; LF, HF, LF/HF of the last ``hrv_window`` s of them into ``res``.
 
         Returns the long window's extent (None when nothing has been published in this segment).
         """
         if end > start:
-            if res.ok:
+            if res.ok and res.hrv_reason is None:
                 if self._clean_since is None:
                     self._clean_since = float(view.t[start])
-                self._beats.extend(view.t[peaks].tolist())
-            else:  # a flagged stretch has no trusted beats: the series restarts after it
+                self._beats.extend(self._nn_times(view, res, start, end))
+            else:  # a flagged stretch, or beats unfit for HRV: the series restarts after it
                 self._restart_beats()
         if self._boundary is None:
             return None
@@ -291,7 +294,8 @@ class NeurokitProcessor:
         del self._beats[:first]  # older beats never fall inside a later long window
         beats = np.asarray(self._beats)
         if res.ok:
-            values, reasons = hrv_frequency_of_beats(beats, seconds)
+            values, reasons = hrv_frequency_of_beats(beats, seconds, self.settings.max_beat_gap_seconds,
+                                                     cleaned=True, spectrum=self.settings.hrv_spectrum)
             for key in FREQUENCY_SCALARS:
                 res.scalars[key] = values[key]
                 if key in reasons:
@@ -299,6 +303,22 @@ class NeurokitProcessor:
                 else:
                     res.nan_reasons.pop(key, None)
         return {"t_start": t_start, "t_end": t_end, "seconds": seconds, "beats": int(beats.shape[0])}
+
+    def _nn_times(self, view: _View, res: WindowResult, start: int, end: int) -> list[float]:
+        """Source times of the window's artefact-corrected beats in the published part [start, end) of
+        the view (each beat once: the published parts tile the stream)."""
+        if res.nn_beats is None or not res.nn_beats.shape[0]:
+            return []
+        pos = res.nn_beats + view.offset  # window samples -> view samples
+        pos = pos[(pos >= start - 0.5) & (pos < end - 0.5)]
+        times = np.interp(pos, np.arange(view.t.shape[0]), view.t)
+        out: list[float] = []
+        last = self._beats[-1] if self._beats else -math.inf
+        for t in times:
+            if t - last >= self.dedup:
+                out.append(float(t))
+                last = t
+        return out
 
     def _view(self, w: Window, res: WindowResult) -> _View:
         """Signal and peaks to publish from: the window itself, or the window plus its lead-in."""
@@ -404,6 +424,9 @@ class NeurokitProcessor:
             "nan": dict(res.nan_reasons),
             "features": {k: (v if math.isfinite(v) else None) for k, v in res.scalars.items()},
             "peaks_in_window": int(res.peaks.shape[0]),
+            "beats": dict(res.beats),
+            **({"hrv_method": hrv.METHODS[self.settings.hrv_spectrum]} if "lf" in SCALARS[self.cfg.mode]
+               else {}),
             "peaks_published": int(peaks.shape[0]),
             "duplicates_dropped": dups,
             "lead_in_samples": view.offset,

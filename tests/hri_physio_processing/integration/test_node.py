@@ -17,7 +17,7 @@ import pytest
 
 from helpers import NodeProcess, resolve_lsl, wait_until
 from helpers.processing import Outputs, nk_direct_ecg, random_chunks
-from hri_physio_processing.features import HEART_SCALARS
+from hri_physio_processing.features import FREQUENCY_SCALARS, HEART_SCALARS
 
 pytestmark = pytest.mark.ros
 FS = 130
@@ -180,7 +180,7 @@ def test_ros_in_ros_out_matches_neurokit_and_timestamps(mitdb, ros_context, coll
             frame = out.frames[name][k]
             assert frame.timestamps.tolist() == [w["t_end"]]  # stamped with the window's end
             value = frame.values[0, 0]
-            if name in ("lf", "lfhf", "hf"):
+            if name in FREQUENCY_SCALARS:
                 assert math.isnan(value) and name in st["nan"]
             else:
                 assert value == pytest.approx(ref[name], rel=1e-9), name

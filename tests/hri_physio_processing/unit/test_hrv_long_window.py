@@ -2,8 +2,9 @@
 
 LF, HF and LF/HF come from the beats the processor already published (no second peak
 detection), over the last ``hrv_window_seconds`` of clean signal, stamped with that window's
-end. Checked against NeuroKit2's ``hrv_frequency`` on the same RR series, before/after the
-2 min / 5 min minimums, and across a gap and a flagged stretch (the beat series restarts).
+end. Checked against the Task Force reference written from the definition
+(``helpers.hrv_reference``) on the same RR series, before/after the 2 min / 5 min minimums, and
+across a gap and a flagged stretch (the beat series restarts).
 """
 
 from __future__ import annotations
@@ -15,14 +16,23 @@ import neurokit2 as nk
 import numpy as np
 import pytest
 
-from helpers.processing import frames_of, published_peaks, random_chunks, run_processor, statuses
+from helpers.hrv_reference import band_powers
+from helpers.processing import (
+    frames_of,
+    nk_corrected_times,
+    published_peaks,
+    random_chunks,
+    run_processor,
+    statuses,
+)
+from hri_physio_processing import hrv
 from hri_physio_processing.config import ProcessorConfig
 from hri_physio_processing.features import hrv_frequency_of_beats
 
 FS = 130
 T0 = 500.0  # an LSL-like clock offset
-FREQ = ("lf", "hf", "lfhf")
-NEED = {"hf": 60.0, "lf": 120.0, "lfhf": 300.0}
+FREQ = ("lf", "hf", "lfhf", "lfnu", "hfnu")
+NEED = {"hf": 60.0, "lf": 120.0, "lfhf": 300.0, "lfnu": 300.0, "hfnu": 300.0}
 
 
 @pytest.fixture(scope="module")
@@ -41,14 +51,7 @@ def run(x: np.ndarray, seed: int = 1, **values) -> tuple[np.ndarray, list]:
     return t, out
 
 
-def nk_on_beats(beats: np.ndarray) -> dict[str, float]:
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        fd = nk.hrv_frequency({"RRI": np.diff(beats) * 1000.0})
-    return {"lf": fd["HRV_LF"][0], "hf": fd["HRV_HF"][0], "lfhf": fd["HRV_LFHF"][0]}
-
-
-def test_lf_hf_lfhf_after_their_minimum_durations_equal_neurokit(ecg_hrv) -> None:
+def test_lf_hf_lfhf_after_their_minimum_durations_equal_the_reference(ecg_hrv) -> None:
     _, out = run(ecg_hrv)
     wins = statuses(out)
     beats = published_peaks(out)
@@ -57,12 +60,14 @@ def test_lf_hf_lfhf_after_their_minimum_durations_equal_neurokit(ecg_hrv) -> Non
     for k, st in enumerate(wins):
         h = st["hrv_window"]
         assert st["ok"] and h["t_start"] is not None
+        assert st["hrv_method"] == hrv.METHOD  # the report prints it beside the numbers
         # The long window ends where this window's published part ends, and its values are stamped there.
         assert h["t_end"] == st["published"]["t_end"] <= st["t"]
         assert h["seconds"] == pytest.approx(min(300.0, h["t_end"] - T0))
         inside = beats[(beats >= h["t_start"]) & (beats <= h["t_end"])]
         assert inside.shape[0] == h["beats"]
-        ref = nk_on_beats(inside)
+        nn_beats, _ = nk_corrected_times(inside)  # the processor corrects artefacts (Lipponen & Tarvainen)
+        ref = band_powers(np.diff(nn_beats) * 1000.0, beat_times=nn_beats)
         for name in FREQ:
             frame = frames[name][k]
             assert frame.timestamps.tolist() == [h["t_end"]]
@@ -70,20 +75,24 @@ def test_lf_hf_lfhf_after_their_minimum_durations_equal_neurokit(ecg_hrv) -> Non
             if h["seconds"] < NEED[name]:
                 assert math.isnan(got) and f"{NEED[name]:g} s" in st["nan"][name]
             else:
-                assert got == pytest.approx(ref[name], rel=1e-9), (name, k)
+                # The processor corrects beats window by window (each in the window that publishes
+                # it), the reference the whole series at once: where ECGSYN's variability makes the
+                # method move a beat, the two contexts can differ, within the issue's 2 %.
+                assert got == pytest.approx(ref[name], rel=0.02), (name, k)
                 assert name not in st["nan"]
                 seen_finite.add(name)
     assert seen_finite == set(FREQ)
     last = wins[-1]
     assert last["features"]["lfhf"] is not None and last["hrv_window"]["seconds"] == 300.0
-    # The same series as R-peak sample indices (what hrv_frequency usually gets) agrees too.
+    # In ms^2: LF + HF is of the order of the RR series' variance (ms^2; Hann-weighted segments of a
+    # spline, so not bounded by it exactly), most of it at 70 +- 3 bpm.
     h = last["hrv_window"]
-    inside = beats[(beats >= h["t_start"]) & (beats <= h["t_end"])]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        fd = nk.hrv_frequency(np.rint((inside - T0) * FS).astype(int), sampling_rate=FS)
-    assert last["features"]["lfhf"] == pytest.approx(fd["HRV_LFHF"][0], rel=1e-3)
-    assert 0.05 < last["features"]["lfhf"] < 20
+    rr = np.diff(beats[(beats >= h["t_start"]) & (beats <= h["t_end"])]) * 1000.0
+    f = last["features"]
+    assert 0.2 * np.var(rr) < f["lf"] + f["hf"] < 1.5 * np.var(rr)
+    assert f["lfnu"] + f["hfnu"] == pytest.approx(100.0)
+    assert f["lfhf"] == pytest.approx(f["lfnu"] / f["hfnu"])
+    assert 0.05 < f["lfhf"] < 20
 
 
 def test_lfhf_nan_before_five_minutes_of_clean_beats(ecg_hrv) -> None:

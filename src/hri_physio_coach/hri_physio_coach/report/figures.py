@@ -21,7 +21,7 @@ from matplotlib.patches import Patch
 from matplotlib.ticker import MultipleLocator
 
 from hri_physio_coach.report.bagdata import BagTables
-from hri_physio_coach.report.metrics import HeartRate, feature_times, hrv_series
+from hri_physio_coach.report.metrics import HeartRate, feature_times, hrv_method, hrv_method_text, hrv_series
 from hri_physio_coach.report.timeline import EXERCISE_KINDS, RuleOutcome, SessionClock, Span, Timeline
 from hri_physio_coach.zones import HeartRateZone, fuzzy_probability
 
@@ -342,12 +342,13 @@ def fuzzy_overlay_figure(path: Path, timeline: Timeline, hr: HeartRate | None, t
     return path
 
 
-HRV_LABELS = {"lf": "LF power", "hf": "HF power", "lfhf": "LF/HF"}
+HRV_LABELS = {"lf": "LF (ms²)", "hf": "HF (ms²)", "lfhf": "LF/HF"}
 
 
 def hrv_figure(path: Path, timeline: Timeline, tables: BagTables, clock: SessionClock,
                title: str) -> Path | None:
-    """LF, HF and LF/HF over the session (None if the processor published no finite value)."""
+    """LF, HF (ms²) and LF/HF over the session, with the method and window under the axes (None if the
+    processor published no finite value)."""
     finite = {t: s for t, s in hrv_series(tables).items() if np.isfinite(s.values[:, 0]).any()}
     if not finite:
         return None
@@ -364,7 +365,8 @@ def hrv_figure(path: Path, timeline: Timeline, tables: BagTables, clock: Session
         ax.set_ylabel(HRV_LABELS.get(feature, feature), fontsize=9)
         ax.set_title(topic, fontsize=8, loc="right", color="#666666")
         ax.grid(color="#eeeeee", lw=0.6)
-    axes[-1].set_xlabel("Session time (min)")
+    axes[-1].set_xlabel("Session time (min)\n\n" + "\n".join(textwrap.wrap(
+        hrv_method_text(hrv_method(tables)), 170)), fontsize=8)
     axes[-1].set_xlim(0, max(_minutes(timeline.end, t0), 1e-3))
     fig.suptitle(title, fontsize=11)
     fig.savefig(path, dpi=DPI)

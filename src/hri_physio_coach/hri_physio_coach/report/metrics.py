@@ -159,6 +159,7 @@ def compute(tables: BagTables, timeline: Timeline, clock: SessionClock,
         "receivers": _receivers(tables),
         "recorder_lost_messages": tables.custom_data.get("lost_messages"),
         "hrv": hrv_summary(tables),
+        "hrv_method": hrv_method(tables),
         "session_events": session_events(timeline),
     }
     if hr is not None:
@@ -300,6 +301,36 @@ def hrv_summary(tables: BagTables) -> dict[str, Any]:
         if not finite.size and reason:
             out[topic]["nan_reason"] = reason
     return out
+
+
+def hrv_method(tables: BagTables) -> dict[str, Any]:
+    """How the processor computed LF, HF, LF/HF, and over how long a window: what its status says.
+
+    ``method``: the processor's ``hrv_method`` sentence (None from a processor that did not publish
+    one: before it computed LF and HF in ms^2). ``window_seconds``: the longest ``hrv_window`` any
+    status reported (the configured ``hrv_window_seconds`` once the beat series is that long); None
+    for LF/HF on each window itself.
+    """
+    method, seconds = None, []
+    for topic, msgs in tables.json.items():
+        if not topic.startswith("/physio/"):
+            continue
+        for m in msgs:
+            if isinstance(m.data.get("hrv_method"), str):
+                method = m.data["hrv_method"]
+            window = m.data.get("hrv_window")
+            if isinstance(window, dict) and window.get("seconds"):
+                seconds.append(float(window["seconds"]))
+    return {"method": method, "window_seconds": _clean(max(seconds), 1) if seconds else None}
+
+
+def hrv_method_text(method: dict[str, Any]) -> str:
+    window = method.get("window_seconds")
+    where = (f"over the last {window:g} s of clean beats before each window's end" if window
+             else "over each processing window")
+    how = method.get("method") or ("method not in the recording (a processor before LF and HF in ms^2: "
+                                    "NeuroKit2's hrv_frequency, scaled to its maximum)")
+    return f"{how}; {where}."
 
 
 def _nan_reason(tables: BagTables, topic: str) -> str | None:

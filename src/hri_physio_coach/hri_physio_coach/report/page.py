@@ -8,6 +8,8 @@ from html import escape
 from pathlib import Path
 from typing import Any
 
+from hri_physio_coach.report.metrics import hrv_method_text
+
 CSS = """
 body{font-family:-apple-system,'Segoe UI',Helvetica,Arial,sans-serif;margin:2em auto;max-width:1180px;
 color:#222;line-height:1.4;padding:0 1em}
@@ -87,7 +89,8 @@ def render(report: dict[str, Any], figures: dict[str, Path], configs: dict[str, 
     ]))
     for name, alt in (("hr_session", "Heart rate over the session"),
                       ("fuzzy_probability", "Fuzzy rule p(HR)"),
-                      ("fuzzy_overlay", "p(HR) along the heart-rate trace"), ("hrv", "LF, HF and LF/HF")):
+                      ("fuzzy_overlay", "p(HR) along the heart-rate trace"),
+                      ("hrv", "LF, HF (ms²) and LF/HF")):
         if name in figures:
             parts.append(f"<h2>{escape(alt)}</h2>{_image(figures[name], alt)}")
 
@@ -149,6 +152,9 @@ def render(report: dict[str, Any], figures: dict[str, Path], configs: dict[str, 
 
     hrv = report.get("hrv") or {}
     parts.append("<h2>Heart-rate variability (frequency domain)</h2>")
+    if report.get("hrv_method"):
+        method = escape(hrv_method_text(report["hrv_method"]))
+        parts.append(f"<p class='note'>LF and HF in ms², LF/HF unitless. {method}</p>")
     if hrv:
         parts.append(_table(["Topic", "Windows", "Finite", "Median", "Mean", "Last", "Why NaN"],
                             [[t, v["windows"], v["finite"], v["median"], v["mean"], v["last"],

@@ -3,10 +3,12 @@
 Reads frames from a ROS 2 topic, an LSL stream or a CSV log, windows them (default 60 s
 every 5 s), runs NeuroKit2 on each window and publishes, under ``<output_prefix>``:
 
-  ECG  clean, rpeaks, beat_hr (frames); hr, sdnn, rmssd, pnn50, lf, hf, lfhf, quality
+  ECG  clean, rpeaks, beat_hr (frames); hr, sdnn, rmssd, pnn50, pnn20, lf, hf, lfhf, lfnu, hfnu,
+       quality
   PPG  clean, peaks, beat_hr (frames);  the same scalars
   EDA  clean, scr_peaks (frames);        tonic, scr_count, scr_amplitude
-  status (std_msgs/String JSON with "t"): window extent, flags, why a feature is NaN
+  status (std_msgs/String JSON with "t"): window extent, flags, why a feature is NaN, beats
+       (detected, corrected as artefacts, beat-free stretches)
 
 Scalars are one-sample frames [t, value] stamped with the end of their window. A CSV input
 that does not exist is an error at once (exit 1); an LSL stream or ROS topic that is not

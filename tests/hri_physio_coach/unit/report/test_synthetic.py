@@ -116,7 +116,9 @@ def session(*, clock: bool = True, stop_at: float | None = None, policy: str = "
                 b.add(f"{topics.POLAR_H10_ECG}/{feature}", "std_msgs/msg/Float64MultiArray", wall(t + 40),
                       frame_msg(np.array([1000.0 + t]), np.array([value]), (feature,)))
             status = {"t": 1000.0 + t, "event": "window", "ok": True, "flags": [],
-                      "nan": {"lfhf": "window 60 s shorter than the 300 s LFHF needs"}}
+                      "nan": {"lfhf": "window 60 s shorter than the 300 s LFHF needs"},
+                      "hrv_window": {"t_start": 1000.0, "t_end": 1000.0 + t, "seconds": t, "beats": 80},
+                      "hrv_method": "Task Force (1996): Welch, LF 0.04-0.15 Hz and HF 0.15-0.40 Hz in ms^2"}
             b.add(f"{topics.POLAR_H10_ECG}/status", "std_msgs/msg/String", wall(t + 40),
                   string_msg(json.dumps(status)))
     return b
@@ -173,6 +175,11 @@ def test_hrv_summary_and_figure(full) -> None:
     lfhf = hrv[f"{topics.POLAR_H10_ECG}/lfhf"]
     assert lfhf["finite"] == 0 and "300 s" in lfhf["nan_reason"]
     assert full.files["hrv"].stat().st_size > 10_000
+    # which method and window: in report.json and on the page
+    assert full.report["hrv_method"]["window_seconds"] == 160.0
+    assert "ms^2" in full.report["hrv_method"]["method"] and "Welch" in full.report["hrv_method"]["method"]
+    page = full.files["report_html"].read_text()
+    assert "LF and HF in ms²" in page and "over the last 160 s of clean beats" in page
     assert "fuzzy_probability" not in full.files  # threshold policy: no fuzzy figures
 
 
