@@ -110,7 +110,7 @@ def test_a_lost_node_ends_the_session_with_one_error_line_and_a_complete_bag(
         short_session: list[str], node: str, options: list[str], why: str, reason: str) -> None:
     with NodeProcess("hri_physio_session", *short_session, "--speed", "10", "--no-ecg", *options,
                      env=session_env()) as session:
-        session.wait_for_output("[session] 00:00/04:30 calibration", timeout=180)  # the routine runs
+        session.wait_for_output("/04:30 calibration", timeout=180)  # the routine runs (its first line)
         os.kill(node_pid(session.proc.pid, node), signal.SIGKILL)
         code = session.wait(300)
     out = session.output
