@@ -142,3 +142,15 @@ def test_open_input_gives_up_promptly_when_stopped(lsl_name: str) -> None:
     with pytest.raises(OpenCancelled, match=re.escape(f"waiting for LSL stream name='{lsl_name}-never'")):
         LslStreamer(f"{lsl_name}-never").open_input(timeout=30, stop=stop)
     assert time.monotonic() - start < 1.5
+
+
+@pytest.mark.lsl
+def test_more_outlets_than_liblsls_default_port_range_holds_are_all_found(lsl_name: str) -> None:
+    """config/lsl_api.cfg widens the port range: with liblsl's default (32 ports, 2 an outlet) the
+    17th outlet on the machine got a random port and was never resolved."""
+    infos = [pylsl.StreamInfo(f"{lsl_name}/{i}", "Test", 1, 10.0, "float32", f"{lsl_name}{i}")
+             for i in range(24)]
+    outlets = [pylsl.StreamOutlet(info) for info in infos]
+    found = resolve_lsl(pred=f"starts-with(name,'{lsl_name}/')", minimum=len(outlets))
+    assert sorted(int(info.name().rsplit("/", 1)[1]) for info in found) == list(range(len(outlets)))
+    del outlets

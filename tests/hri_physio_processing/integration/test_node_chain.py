@@ -64,8 +64,11 @@ def test_simulator_receiver_processor_chain(collector, lsl_name: str) -> None:
                      "--hop-seconds", "4", "--min-window-seconds", "4", "--wait-for-consumers", "30") as proc:
         wait_until(lambda: collector.node.count_subscribers(topic) > 0, 60,
                    lambda: f"the processor's subscription:\n{proc.output}")
+        # The receiver waits for the simulator's stream as long as the simulator waits for it (a busy
+        # machine starts either of them late).
         with NodeProcess("physio_receiver", "--input", f"lsl:{stream}", "--output", f"ros:{topic}",
-                         "--output-frame", "13", "--wait-for-consumers", "30") as rx, NodeProcess(
+                         "--output-frame", "13", "--wait-for-consumers", "30",
+                         "--resolve-timeout", "60") as rx, NodeProcess(
             "physio_simulator", "--seconds", "22", "--signals", "ecg", "--bpm", "70",
             "--name-prefix", lsl_name, "--wait-for-consumers", "30",
         ) as sim:
