@@ -168,8 +168,9 @@ def test_interactive_waits_for_start_on_stdin_and_stops_on_sigterm(probe: Probe)
         coach.proc.stdin.flush()
         wait_until(lambda: probe.events("session_start"), 20, "session_start after 'start' on stdin")
         wait_until(lambda: probe.events("activity"), 20, "the first activity")
-        wait_until(lambda: probe.states, 20, "a state on /coach/state")
-        state = probe.states[-1]
+        # The state is published on the tick after the events: wait for the one that says it runs.
+        wait_until(lambda: any(st["state"] == "running" for st in probe.states), 20, "a running state")
+        state = next(st for st in probe.states if st["state"] == "running")
         where = (state["state"], state["phase"], state["activity"])
         assert where == ("running", "calibration", "seated_rest")
         assert state["participant"] == probe.events("session_start")[0]["participant"]
