@@ -102,11 +102,16 @@ class InFlight:
     def oldest(self) -> float | None:
         return self._sent[0] if self._sent else None
 
-    def give_up_oldest(self) -> None:
-        """The oldest request will not be answered: stop waiting for it (its answer still counts if heard)."""
-        if self._sent:
-            self._sent.popleft()
-            self._settled += 1
+    def give_up(self) -> None:
+        """An answer did not come in time: stop waiting for every request in flight, and count afresh.
+
+        One lost answer (a reply sent before this watcher matched the controller, a node that died)
+        would otherwise leave the count one short for good: every later request would look
+        unanswered and hold the clock until given up, one at a time, for the rest of the session.
+        """
+        self._settled += len(self._sent)
+        self._sent.clear()
+        self._answered = max(self._answered, self._settled)
 
     def _drain(self) -> None:
         while self._sent and self._settled < self._answered:
@@ -215,7 +220,7 @@ class ClockGuard:
         elif cause == DECISION:
             self._released_decision = self._decision  # the coach gives up on late heart rate itself
         else:
-            (self._commands if cause == ROBOT else self._media).give_up_oldest()
+            (self._commands if cause == ROBOT else self._media).give_up()
 
     def report(self, clock: SimClock) -> dict[str, object]:
         """For summary.json: wall seconds held, holds and releases by cause."""

@@ -152,3 +152,21 @@ def test_a_coach_that_never_decides_is_given_up_on_after_max_hold() -> None:
     assert guard.limit(102.9) is None and guard.released == {DECISION: 1}
     guard.coach_decision(130.0)
     assert guard.limit(102.9) == pytest.approx(132.9)
+
+
+def test_after_a_lost_answer_is_given_up_later_answered_commands_hold_nothing() -> None:
+    """One reply lost for good (say, sent before the guard's subscription matched) must not leave
+    every later command looking unanswered: the release counts afresh."""
+    wall = Wall()
+    guard = ClockGuard(reply_lag=1.0, max_hold=5.0, monotonic=wall)
+    guard.command_sent(10.0)  # its reply is never heard
+    guard.command_sent(10.5)
+    guard.command_answered()  # the answer to the second one (counted against the first)
+    assert guard.limit(11.5) == pytest.approx(11.5)  # held: the count says one is still open
+    wall.t += 5.5
+    assert guard.limit(11.5) is None and guard.released == {ROBOT: 1}
+    for k in range(5):  # later commands, each answered: none holds the clock
+        guard.command_sent(20.0 + k)
+        guard.command_answered()
+        assert guard.limit(21.5 + k) is None
+    assert guard.holds == {ROBOT: 1}
