@@ -6,6 +6,7 @@ More specific helpers live beside this module (``helpers.bags``, ``helpers.proce
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -32,6 +33,20 @@ def wait_until(predicate: Callable[[], bool], timeout: float, what: str | Callab
             text = what() if callable(what) else what
             raise AssertionError(f"timed out after {timeout:g} s waiting for {text}")
         time.sleep(period)
+
+
+#: A line the DDS middleware logs by itself: Fast DDS's "<date> <time> [CATEGORY Error] ...", coloured.
+_MIDDLEWARE_LINE = re.compile(r"^(?:\x1b\[[\d;]*m)*\d{4}-\d\d-\d\d \d\d:\d\d:\d\d\.\d+ (?:\x1b\[[\d;]*m)*\[")
+
+
+def own_lines(stderr: str) -> list[str]:
+    """The lines of ``stderr`` our program wrote, without the middleware's own log lines.
+
+    Fast DDS logs, for example, "Failed init_port fastdds_port7004: open_and_lock_file failed" when
+    a killed process left its shared-memory port behind, then picks another port. That line is not
+    ours to keep to one line; ours still must be.
+    """
+    return [line for line in stderr.strip().splitlines() if not _MIDDLEWARE_LINE.match(line)]
 
 
 def publish_burst(publisher, messages, timeout: float = 60.0) -> None:

@@ -194,6 +194,26 @@ def session_folder(output: str) -> Path:
     return Path(line.removeprefix("[session] session folder: "))
 
 
+def failed_nodes_logs(output: str, base: Path = Path(), tail: int = 60) -> str:
+    """The launcher's ``output`` and the last ``tail`` lines of the log of every node that did not exit 0.
+
+    A node stuck on its way out is ended with SIGABRT and prints every thread's stack into its log:
+    this puts that stack into the failure message, where CI shows it.
+    """
+    try:
+        folder = base / session_folder(output)
+        nodes = json.loads((folder / "summary.json").read_text())["nodes"]
+    except (StopIteration, OSError, ValueError, KeyError):
+        return output
+    parts = [output]
+    for name, node in nodes.items():
+        if node.get("exit_status") not in (0, None):
+            log = folder / node["log"]
+            lines = log.read_text(errors="replace").splitlines()[-tail:] if log.is_file() else ["(no log)"]
+            parts.append(f"--- {name} exited {node['exit_status']}; the end of {log}:\n" + "\n".join(lines))
+    return "\n".join(parts)
+
+
 def bag_messages(bag: Path) -> dict[str, list]:
     """Every message on the session events and the receivers' outputs, in the order recorded."""
     from rosbags.highlevel import AnyReader

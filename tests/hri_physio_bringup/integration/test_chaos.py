@@ -20,7 +20,7 @@ import pytest
 
 from helpers import NodeProcess, session_env
 from helpers.routines import FOUR_AND_A_HALF_MINUTES, short_routine
-from helpers.session_bags import RECEIVERS, bag_messages, check_counter, session_folder
+from helpers.session_bags import RECEIVERS, bag_messages, check_counter, failed_nodes_logs, session_folder
 from hri_physio_bridge import topics
 
 pytestmark = pytest.mark.ros
@@ -69,7 +69,7 @@ def test_every_restartable_node_killed_once_is_restarted_and_only_the_gaps_lose_
                 session.wait_for_output(f"[session] {node} publishes again:", timeout=120)
         code = session.wait(300)
     out = session.output
-    assert code == 0, f"{plan}\n{out}"
+    assert code == 0, f"{plan}\n{failed_nodes_logs(out)}"
     assert "Traceback" not in out, plan
     folder = session_folder(out)
     summary = json.loads((folder / "summary.json").read_text())

@@ -42,6 +42,7 @@ import pytest
 
 from helpers import session_env
 from helpers.routines import TEN_MINUTES, short_routine
+from helpers.session_bags import failed_nodes_logs
 from hri_physio_bridge import topics
 from hri_physio_coach.config import COACH_NODE, CoachConfig, CoachNodeConfig
 from hri_physio_coach.evaluate.compare import changes, compare_changes
@@ -113,7 +114,7 @@ def session(tmp_path_factory: pytest.TempPathFactory, session_tag: str) -> Path:
                "--device-id", f"SIM{session_tag}e2e", "--out", str(out)]
     run = subprocess.run(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                          text=True, timeout=400, cwd=out, env=session_env())
-    assert run.returncode == 0, run.stdout
+    assert run.returncode == 0, failed_nodes_logs(run.stdout, out)
     (folder,) = [p for p in out.iterdir() if p.is_dir()]  # the session's
     summary = json.loads((folder / "summary.json").read_text())
     assert summary["outcome"] == "finished", run.stdout

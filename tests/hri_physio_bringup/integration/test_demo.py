@@ -17,6 +17,7 @@ import pytest
 import yaml
 
 from helpers import ROOT, session_env
+from helpers.session_bags import failed_nodes_logs
 
 pytestmark = [pytest.mark.ros, pytest.mark.lsl]
 
@@ -53,7 +54,7 @@ def demo(tmp_path_factory: pytest.TempPathFactory, session_tag: str) -> tuple[Ru
 
 def test_the_demo_runs_to_its_end_calmly(demo: tuple[Run, Path]) -> None:
     run, folder = demo
-    assert run.returncode == 0, run.stdout
+    assert run.returncode == 0, failed_nodes_logs(run.stdout, folder.parents[1])
     lines = run.stdout.splitlines()
     assert len(lines) < 150, run.stdout
     assert "Traceback" not in run.stdout
@@ -62,14 +63,15 @@ def test_the_demo_runs_to_its_end_calmly(demo: tuple[Run, Path]) -> None:
 
 
 def test_the_session_folder_holds_everything(demo: tuple[Run, Path]) -> None:
-    _, folder = demo
+    run, folder = demo
     assert (folder / "bag" / "metadata.yaml").is_file()
     for node in NODES:
         assert (folder / "logs" / f"{node}.log").stat().st_size > 0, node
         conf = yaml.safe_load((folder / "configs" / f"{node}.yaml").read_text())
         assert len(conf) == 1 and "ros__parameters" in next(iter(conf.values())), node
     summary = json.loads((folder / "summary.json").read_text())
-    assert (summary["outcome"], summary["exit_status"], summary["bag"]) == ("finished", 0, "bag")
+    assert (summary["outcome"], summary["exit_status"], summary["bag"]) == ("finished", 0, "bag"), \
+        failed_nodes_logs(run.stdout, folder.parents[1])
     assert {name: n["exit_status"] for name, n in summary["nodes"].items()} == dict.fromkeys(NODES, 0)
     conf = str(folder / "configs" / "hr_receiver.yaml")
     assert summary["nodes"]["hr_receiver"]["argv"][:2] == ["--conf", conf]

@@ -18,8 +18,9 @@ from pathlib import Path
 import pytest
 import yaml
 
-from helpers import NodeProcess, session_env
+from helpers import NodeProcess, own_lines, session_env
 from helpers.routines import FOUR_AND_A_HALF_MINUTES, short_routine
+from helpers.session_bags import failed_nodes_logs
 
 pytestmark = pytest.mark.ros
 
@@ -60,7 +61,7 @@ def test_coach_can_adapt_on_the_processors_heart_rate(short_session: list[str], 
     with NodeProcess("hri_physio_session", *short_session, "--hr-source", "ecg", "--no-record",
                      "--speed", "10", env=session_env()) as session:
         code = session.wait(240)
-    assert code == 0, session.output
+    assert code == 0, failed_nodes_logs(session.output)
     folder = session_folder(session.output)
     assert not (folder / "bag").exists() and not (folder / "report.json").exists()  # nothing recorded
     summary = json.loads((folder / "summary.json").read_text())
@@ -86,14 +87,15 @@ def test_sigint_stops_every_node_and_leaves_a_bag_a_summary_and_a_report(short_s
         assert first["outcome"] == "running" and first["ros_domain"] != int(os.environ["ROS_DOMAIN_ID"])
         second = run_session(*short_session, env=session_env(ROS_DOMAIN_ID=str(first["ros_domain"])))
         assert second.returncode == 1, (second.stdout, second.stderr)
-        line = second.stderr.strip()
-        assert "\n" not in line and line.startswith("hri_physio_session: error: ROS domain "), line
+        lines = own_lines(second.stderr)
+        line = lines[0]
+        assert len(lines) == 1 and line.startswith("hri_physio_session: error: ROS domain "), line
         assert f"pid {session.proc.pid}" in line and first["folder"] in line
         assert "Traceback" not in second.stdout + second.stderr
         session.wait_for_output("[session] 01:0", timeout=120)  # a minute of session ran (of 04:30)
         code = session.stop(signal.SIGINT, timeout=120)
     out = session.output
-    assert code == 0, out
+    assert code == 0, failed_nodes_logs(out)
     assert "SIGINT: stopping the session" in out and "Traceback" not in out
     assert re.search(r"\[session\] stopped before its end: [01]\.\d min of session", out), out
     folder = session_folder(out)
@@ -139,7 +141,7 @@ def session_folder_of_running(output: str) -> Path:
 def test_bad_options_are_one_clear_line(args: list[str], message: str, tmp_path: Path) -> None:
     c = run_session(*args, "--out", str(tmp_path / "s"))
     assert c.returncode == 2, (c.stdout, c.stderr)
-    lines = c.stderr.strip().splitlines()
+    lines = own_lines(c.stderr)
     assert len(lines) == 1 and lines[0].startswith("hri_physio_session: error: "), lines
     assert message in lines[0], lines
     assert c.stdout == "" and not (tmp_path / "s").exists()
@@ -155,6 +157,6 @@ def test_an_invalid_coach_configuration_starts_nothing(coach_yaml: str, message:
     conf.write_text(coach_yaml)
     c = run_session("--conf", str(conf), "--out", str(tmp_path / "s"))
     assert c.returncode == 2, (c.stdout, c.stderr)
-    lines = c.stderr.strip().splitlines()
+    lines = own_lines(c.stderr)
     assert len(lines) == 1 and message in lines[0], lines
     assert not (tmp_path / "s").exists()  # no folder, no bag, no node started

@@ -17,7 +17,7 @@ import pytest
 
 from helpers import NodeProcess, session_env
 from helpers.routines import FOUR_AND_A_HALF_MINUTES, short_routine
-from helpers.session_bags import RECEIVERS, bag_messages, check_counter, session_folder
+from helpers.session_bags import RECEIVERS, bag_messages, check_counter, failed_nodes_logs, session_folder
 
 pytestmark = [pytest.mark.ros, pytest.mark.lsl]
 
@@ -43,7 +43,7 @@ def test_a_session_with_both_cores_busy_ends_cleanly_with_nothing_lost(
     with NodeProcess("hri_physio_session", *options, env=session_env()) as session:
         code = session.wait(840)
     out = session.output
-    assert code == 0, out
+    assert code == 0, failed_nodes_logs(out)
     assert "Traceback" not in out and "not processed" not in out
     folder = session_folder(out)
     summary = json.loads((folder / "summary.json").read_text())

@@ -19,7 +19,7 @@ from typing import Any
 
 import pytest
 
-from helpers import NodeProcess, publish_burst, wait_until
+from helpers import NodeProcess, own_lines, publish_burst, wait_until
 from hri_physio_bridge import topics
 from hri_physio_bridge.ros_tools import ExecutorThread, clock_message
 
@@ -70,7 +70,7 @@ def test_invalid_configuration_is_one_clear_line(args: list[str], message: str, 
         args = [str(conf) if a == "EMPTY_LADDER" else a for a in args]
     c = run(*args)
     assert c.returncode == 2, (c.stdout, c.stderr)
-    lines = c.stderr.strip().splitlines()
+    lines = own_lines(c.stderr)
     assert len(lines) == 1 and lines[0].startswith("qt_physio_coach: error: "), c.stderr
     assert message in lines[0] and "Traceback" not in c.stderr
 

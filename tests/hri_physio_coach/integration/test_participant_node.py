@@ -13,7 +13,7 @@ from typing import Any
 
 import pytest
 
-from helpers import NodeProcess, resolve_lsl, wait_until
+from helpers import NodeProcess, own_lines, resolve_lsl, wait_until
 from hri_physio_bridge import topics
 
 pytestmark = [pytest.mark.ros, pytest.mark.lsl]
@@ -64,7 +64,7 @@ def test_bad_parameters_files_and_options_are_one_line(script: str, args: list[s
 def test_participant_configuration_errors(args: list[str], message: str) -> None:
     c = run("simulated_participant", *args)
     assert c.returncode == 2, (c.stdout, c.stderr)
-    lines = c.stderr.strip().splitlines()
+    lines = own_lines(c.stderr)
     assert len(lines) == 1 and lines[0].startswith("simulated_participant: error: "), c.stderr
     assert message in lines[0]
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from helpers import SRC, NodeProcess, wait_until
+from helpers import SRC, NodeProcess, own_lines, wait_until
 
 pytestmark = pytest.mark.ros
 
@@ -56,8 +56,9 @@ def test_help() -> None:
 def test_bad_configuration_is_one_line_and_status_2(script: str, args: list[str], fragment: str) -> None:
     p = run(script, *args)
     assert p.returncode == 2, p.stderr
-    assert p.stderr.startswith(f"{script}: error:") and fragment in p.stderr, p.stderr
-    assert len(p.stderr.strip().splitlines()) == 1 and "Traceback" not in p.stderr, p.stderr
+    lines = own_lines(p.stderr)
+    assert len(lines) == 1 and lines[0].startswith(f"{script}: error:") and fragment in lines[0], p.stderr
+    assert "Traceback" not in p.stderr, p.stderr
 
 
 def test_unknown_or_broken_conf_file(tmp_path: Path) -> None:

@@ -16,7 +16,7 @@ import pytest
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 
-from helpers import NodeProcess, wait_until
+from helpers import NodeProcess, own_lines, wait_until
 from helpers.bags import check_bag, read_with_mcap, read_with_rosbags
 from hri_physio_bridge.bag.recovery import McapScanner
 
@@ -116,7 +116,7 @@ def test_refuses_to_overwrite_and_bad_arguments(tmp_path: Path) -> None:
     (tmp_path / "exists").mkdir()
     r = subprocess.run([exe, "-o", str(tmp_path / "exists")], capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "never overwritten" in r.stderr and "Traceback" not in r.stderr
-    assert len(r.stderr.strip().splitlines()) == 1
+    assert len(own_lines(r.stderr)) == 1
     for args, text in (
         (["--regex", "("], "regular expression"),
         (["--session-id", "a b"], "session id"),
@@ -139,7 +139,7 @@ def test_refuses_to_overwrite_and_bad_arguments(tmp_path: Path) -> None:
     ):
         r = subprocess.run([exe, "-o", str(tmp_path / "never"), *args], capture_output=True, text=True,
                            timeout=60)
-        lines = r.stderr.strip().splitlines()
+        lines = own_lines(r.stderr)
         assert r.returncode == 2 and "Traceback" not in r.stderr and text in lines[-1], (args, r.stderr)
         assert lines[-1].startswith("recorder: error:"), (args, r.stderr)
     assert not (tmp_path / "never").exists()  # nothing is created before the options are right
@@ -147,7 +147,8 @@ def test_refuses_to_overwrite_and_bad_arguments(tmp_path: Path) -> None:
     assert r.returncode == 0 and "--flush-period" in r.stdout and "--poll-period" in r.stdout
     r = subprocess.run([str(Path(sys.prefix) / "bin" / "physio_recorder"), "--session-id", "a b"],
                        capture_output=True, text=True, timeout=60)
-    assert r.returncode == 2 and r.stderr.startswith("physio_recorder: error:") and "session" in r.stderr
+    lines = own_lines(r.stderr)
+    assert r.returncode == 2 and lines[0].startswith("physio_recorder: error:") and "session" in lines[0]
 
 
 def test_stamps_are_arrival_times_not_take_times(tmp_path: Path, prefix: str, node) -> None:

@@ -14,7 +14,7 @@ import pytest
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray, String
 
-from helpers import NodeProcess, wait_until
+from helpers import NodeProcess, own_lines, wait_until
 from helpers.bags import RawCollector, default_qos, make_bag, serialize
 from hri_physio_bridge.bag.writer import BagWriter
 
@@ -260,4 +260,4 @@ def test_new_names_and_old_names_run_the_same_command(tmp_path: Path) -> None:
         r = _replay(str(bag), "--info", script=script)
         assert r.returncode == 0 and "/a [std_msgs/msg/String] 1 msgs" in r.stdout, r.stderr
         r = _replay(str(bag), "--rate", "-1", script=script)
-        assert r.returncode == 2 and r.stderr.startswith(f"{script}: error:"), r.stderr
+        assert r.returncode == 2 and own_lines(r.stderr)[0].startswith(f"{script}: error:"), r.stderr

@@ -14,7 +14,7 @@ from pathlib import Path
 import pylsl
 import pytest
 
-from helpers import DATA, resolve_lsl
+from helpers import DATA, own_lines, resolve_lsl
 
 CAPTURE = DATA / "polar" / "synthetic_h10.jsonl"
 HAS_SYSTEM_BUS = (
@@ -40,7 +40,7 @@ def test_no_bluetooth_is_one_line_and_status_2(args: list[str]) -> None:
     """The real bleak path: no BlueZ / D-Bus / adapter on this machine."""
     done = streamer(*args, "--scan-timeout", "2")
     assert done.returncode == 2, done.stderr
-    lines = done.stderr.strip().splitlines()
+    lines = own_lines(done.stderr)
     assert len(lines) == 1 and lines[0].startswith("polar_streamer: error: no Bluetooth"), done.stderr
     assert "Traceback" not in done.stderr + done.stdout
 
@@ -64,7 +64,7 @@ def test_no_bluetooth_is_one_line_and_status_2(args: list[str]) -> None:
 def test_configuration_errors(args: list[str], option: str) -> None:
     done = streamer(*args)
     assert done.returncode == 2
-    lines = done.stderr.strip().splitlines()
+    lines = own_lines(done.stderr)
     assert len(lines) == 1 and option in lines[0], done.stderr
 
 
@@ -75,7 +75,7 @@ def test_capture_never_overwrites(tmp_path: Path) -> None:
     assert (
         done.returncode == 2
         and "exists already" in done.stderr
-        and len(done.stderr.strip().splitlines()) == 1
+        and len(own_lines(done.stderr)) == 1
     )
     assert existing.read_text() == "keep me\n"
     done = streamer("--replay", str(CAPTURE), "--capture", str(tmp_path / "new.jsonl"))
