@@ -3,7 +3,9 @@
 There is no ``ros2 launch`` in the pip-wheel ROS 2 used here, so systems are
 started by this launcher (on a full ROS 2 install the same nodes also run with
 ``ros2 run``). Stopping sends SIGINT, then SIGTERM, then SIGABRT, then SIGKILL, each after a
-grace period, so nodes can flush their logs and bags; a node that hangs on its way out prints every
+grace period, so nodes can flush their logs and bags; the grace after SIGINT lasts as long as the
+node keeps working (:mod:`hri_physio_bridge.exit_progress`), so a drain on a busy machine is not cut
+short. A node that hangs on its way out prints every
 thread's stack on SIGABRT (``run_node`` enables :mod:`faulthandler`) before it dies, so its log
 shows where it was stuck. Each process's whole output can go
 to a log file of its own (``log_path``), whatever is echoed to the console. A process that died
@@ -20,12 +22,19 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TextIO
 
+from hri_physio_bridge.exit_progress import ExitProgress, read_activity
 from hri_physio_bridge.waiting import wait_until
+
+#: The most time a stopping process that keeps working gets after SIGINT.
+STOP_LIMIT = 120.0
+#: How often a stopping process is looked at.
+STOP_POLL = 0.1
 
 
 def find_executable(name: str) -> str:
@@ -90,6 +99,7 @@ class ProcessGroup:
         self.on_line = on_line
         self.keep_lines = keep_lines
         self.procs: list[ManagedProcess] = []
+        self.stop_seconds: dict[str, float] = {}
         self._lock = threading.Lock()
 
     def start(self, name: str, script: str, args: Sequence[str] = (), env: dict[str, str] | None = None,
@@ -168,20 +178,31 @@ class ProcessGroup:
 
         return exited[0] if wait_until(any_exited, timeout, stop=stop) else None
 
-    def stop(self, grace: float = 10.0) -> dict[str, int]:
-        """Stop every process (reverse start order); returns exit codes by name."""
+    def stop(self, grace: float = 10.0, limit: float = STOP_LIMIT) -> dict[str, int]:
+        """Stop every process (reverse start order); returns exit codes by name.
+
+        After SIGINT a process gets ``grace`` s, and more for as long as it keeps working (up to
+        ``limit`` s): a node draining its input on a busy machine is not cut short, a stuck one is
+        escalated. :attr:`stop_seconds` says how long each took.
+        """
         codes: dict[str, int] = {}
         for p in reversed(self.procs):
-            codes[p.name] = self._stop_one(p, grace)
+            t0 = time.monotonic()
+            codes[p.name] = self._stop_one(p, grace, limit)
+            self.stop_seconds[p.name] = round(time.monotonic() - t0, 3)
         for p in self.procs:
             p.reader.join(2.0)
         return codes
 
     @staticmethod
-    def _stop_one(p: ManagedProcess, grace: float) -> int:
-        steps = ((signal.SIGINT, grace), (signal.SIGTERM, grace / 2), (signal.SIGABRT, 2.0),
-                 (signal.SIGKILL, 5.0))
-        for sig, wait in steps:
+    def _stop_one(p: ManagedProcess, grace: float, limit: float) -> int:
+        if p.proc.poll() is None:
+            p.proc.send_signal(signal.SIGINT)
+            progress = ExitProgress(time.monotonic(), grace, limit)
+            while p.proc.poll() is None and progress.more_time(time.monotonic(), read_activity(p.proc.pid)):
+                with contextlib.suppress(subprocess.TimeoutExpired):
+                    p.proc.wait(STOP_POLL)
+        for sig, wait in ((signal.SIGTERM, grace / 2), (signal.SIGABRT, 2.0), (signal.SIGKILL, 5.0)):
             if p.proc.poll() is not None:
                 break
             p.proc.send_signal(sig)

@@ -22,6 +22,7 @@ import contextlib
 import faulthandler
 import io
 import logging
+import os
 import sys
 import threading
 from collections.abc import Callable, Sequence
@@ -350,7 +351,7 @@ def run_node(
             return fail(prog, _one_line(exc))
         stop = install_stop_handlers(node.on_stop)
         spinner = ExecutorThread(node)
-        return node.run(stop)
+        code = node.run(stop)
     finally:
         if node is not None:
             try:
@@ -359,4 +360,43 @@ def run_node(
                 if spinner is not None:
                     spinner.close()
                 node.destroy_node()
-        rclpy.try_shutdown()
+        ended = shut_down_ros()
+    if not ended:
+        # The node's work is done and written; only the middleware's teardown is stuck.
+        print(f"{prog}: warning: the ROS 2 middleware did not shut down within {TEARDOWN_TIMEOUT:g} s; "
+              f"exiting with status {code} without waiting for it", file=sys.stderr, flush=True)
+        exit_now(code)
+    return code
+
+
+#: The most time the middleware's teardown (rcl shutdown, the DDS participant) may take at exit.
+TEARDOWN_TIMEOUT = 5.0
+
+
+def shut_down_ros(timeout: float = TEARDOWN_TIMEOUT) -> bool:
+    """Shut rclpy down and destroy its context (the DDS participant); False if that did not end in time.
+
+    Left to the interpreter's exit, the participant is deleted by C++ destructors after Python's
+    own shutdown, where a hang shows no Python stack and outlasts the launcher's grace. Here it
+    runs on a thread of its own, so a hang is bounded and said.
+    """
+    done = threading.Event()
+
+    def teardown() -> None:
+        try:
+            rclpy.try_shutdown()
+            rclpy.get_default_context().destroy()
+        finally:
+            done.set()
+
+    threading.Thread(target=teardown, name="ros-teardown", daemon=True).start()
+    return done.wait(timeout)
+
+
+def exit_now(code: int) -> None:
+    """Flush what Python buffers (logs, stdout, stderr) and end the process without its exit handlers."""
+    logging.shutdown()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    os._exit(code)

@@ -40,6 +40,10 @@ AUDIO_STATUS = "/audio_streamer/status"
 VIDEO_REQUEST = "/video_streamer/video_name"
 VIDEO_STATUS = "/video_streamer/status"
 VIDEO_PREVIEW = "/video_streamer/preview"
+#: The last request sent to each streamer, latched (transient-local, depth 1): a streamer that starts
+#: late or is restarted plays what it should, without any request being sent twice.
+AUDIO_CURRENT = "/audio_streamer/current_request"
+VIDEO_CURRENT = "/video_streamer/current_request"
 
 # --- the coach and the simulated participant ------------------------------------------------------
 COACH_EVENTS = "/coach/events"

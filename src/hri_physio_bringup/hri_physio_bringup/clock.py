@@ -89,14 +89,26 @@ class InFlight:
         self._sent: deque[float] = deque()  # sim times of the requests not settled yet
         self._answered = 0  # answers heard (a running total)
         self._settled = 0  # requests settled
+        self._last_total = 0  # the last running total reported (answered(total=...))
+        self._total_base = 0  # answers heard before the reporting node last restarted
 
     def sent(self, sim_now: float) -> None:
         self._sent.append(sim_now)
         self._drain()
 
     def answered(self, total: int | None = None) -> None:
-        """One more answer, or (``total``) the running total of answers a status reports."""
-        self._answered = self._answered + 1 if total is None else max(self._answered, total)
+        """One more answer, or (``total``) the running total of answers a status reports.
+
+        A total smaller than the last one comes from a restarted node counting from zero again: its
+        answers count on top of those heard before it restarted.
+        """
+        if total is None:
+            self._answered += 1
+        else:
+            if total < self._last_total:
+                self._total_base = self._answered
+            self._last_total = total
+            self._answered = max(self._answered, self._total_base + total)
         self._drain()
 
     def oldest(self) -> float | None:

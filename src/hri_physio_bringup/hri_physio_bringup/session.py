@@ -287,6 +287,7 @@ class Outcome:
     stopped_by: str | None = None
     wall: float = 0.0
     node_codes: dict[str, int] = field(default_factory=dict)
+    stop_seconds: dict[str, float] = field(default_factory=dict)  # SIGINT to exit, per node
     #: How the clock guard held sim time back for the loop (ClockGuard.report), None: no guard.
     clock: dict[str, Any] | None = None
     #: Every restart of a node (Restart.record) and the loss that ended the session (Loss.event), if any.
@@ -451,6 +452,7 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
         if out.stopped_by:
             console.say(f"{out.stopped_by}: stopping the session")
         out.node_codes = group.stop()
+        out.stop_seconds = dict(group.stop_seconds)
         supervision.report()
         watcher.close()
         if guard is not None:
@@ -522,6 +524,7 @@ def _summary_json(options: SessionConfig, plan: SessionPlan, folder: SessionFold
             n.name: {"script": n.script, "config": f"configs/{n.name}.yaml", "log": f"logs/{n.name}.log",
                      "argv": procs[n.name].argv[1:] if n.name in procs else None,
                      "exit_status": out.node_codes.get(n.name),
+                     "stop_seconds": out.stop_seconds.get(n.name),
                      "restarts": sum(r["node"] == n.name for r in out.restarts)}
             for n in plan.nodes
         },

@@ -25,7 +25,7 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 
 from hri_physio_bridge import topics
 from hri_physio_bridge.config import ConfigError
-from hri_physio_bridge.qos import command_qos
+from hri_physio_bridge.qos import command_qos, latched_qos
 from hri_physio_bridge.waiting import Clock, wait_until
 from qt_controller import qt_services
 from qt_controller.config import QtRobotOptions
@@ -96,6 +96,8 @@ class QtController(RobotInterface):
         }
         for key, topic in names.items():
             self._pubs[key] = self.node.create_publisher(String, topic, command_qos())
+        for key, topic in (("audio_current", topics.AUDIO_CURRENT), ("video_current", topics.VIDEO_CURRENT)):
+            self._pubs[key] = self.node.create_publisher(String, topic, latched_qos())
         for part in PARTS:
             self._pubs[part] = self.node.create_publisher(Float64MultiArray, part_topic(part), command_qos())
         self.node.create_subscription(JointState, topics.QT_JOINT_STATE, self._on_joint_state, 10)
@@ -142,10 +144,17 @@ class QtController(RobotInterface):
         return Outcome.success(f"volume {percent} %", volume=int(percent)) if result else result
 
     def set_audio(self, file: str) -> Outcome:
-        return self._send("audio", String(data=file), f"audio {file!r}")
+        return self._send_media("audio", file)
 
     def set_video(self, file: str) -> Outcome:
-        return self._send("video", String(data=file), f"video {file!r}")
+        return self._send_media("video", file)
+
+    def _send_media(self, kind: str, request: str) -> Outcome:
+        """The request, and the same text as the streamer's latched current request (for a restart)."""
+        result = self._send(kind, String(data=request), f"{kind} {request!r}")
+        if result:
+            self._pubs[f"{kind}_current"].publish(String(data=request))
+        return result
 
     def set_emotion(self, name: str) -> Outcome:
         resolved = self.emotions.resolve(name)

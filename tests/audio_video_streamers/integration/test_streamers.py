@@ -203,6 +203,36 @@ def test_the_null_sink_plays_at_sim_time_rate(ros_context: Any, tmp_path: Path) 
         clock.close()
 
 
+def test_a_restarted_streamer_plays_the_latched_current_request_once(ros_context: Any) -> None:
+    """A streamer that starts after the requests were sent (a restart mid-session) plays the last one,
+    as qt_controller latches it; a request that reaches it later wins, and nothing is played twice."""
+    from std_msgs.msg import String
+
+    from hri_physio_bridge.qos import latched_qos
+
+    probe = MediaProbe(ros_context)
+    current = probe.node.create_publisher(String, topics.AUDIO_CURRENT, latched_qos())
+    current.publish(String(data="beat:90"))  # sent before the streamer exists
+    current.publish(String(data="beat:132"))
+    audio = NodeProcess("audio_streamer", "--sink", "null")
+    try:
+        with audio:
+            playing = probe.wait_audio("the latched beat:132 playing", lambda s: s.get("source") == "beat:132"
+                                       and s["state"] == "playing", timeout=60)
+            assert playing["requests"]["received"] == 1, playing  # only the last one, once
+            assert "resuming the current request 'beat:132'" in audio.output
+            wait_until(lambda: probe.node.count_subscribers(topics.AUDIO_REQUEST) >= 1, 60, "requests")
+            probe.send_audio("beat:100")
+            probe.wait_audio("the new request playing", lambda s: s.get("source") == "beat:100")
+            current.publish(String(data="beat:100"))  # as the controller latches each request it sends
+            last = probe.wait_audio("both counted", lambda s: s["requests"]["started"] == 2)
+            assert last["source"] == "beat:100"
+            assert audio.stop(signal.SIGINT) == 0, audio.output
+        assert audio.output.count("resuming the current request") == 1
+    finally:
+        probe.close()
+
+
 @pytest.mark.parametrize(
     ("script", "args", "fragment"),
     [

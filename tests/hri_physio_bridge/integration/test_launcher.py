@@ -68,6 +68,24 @@ def test_stop_sends_sigint_first_and_escalates(on_path: Path) -> None:
     assert codes["stubborn"] == -signal.SIGABRT  # after SIGINT and SIGTERM were ignored
 
 
+def test_a_node_still_working_on_its_way_out_is_not_cut_short(on_path: Path) -> None:
+    """A drain that takes longer than the grace (a busy machine, a long backlog) runs to its end."""
+    script(on_path, "draining_node", (
+        "import signal, sys, time\n"
+        "from hri_physio_bridge.stop_signals import install_stop_handlers\n"
+        "stop = install_stop_handlers()\n"
+        "print('ready', flush=True)\n"
+        "stop.wait()\n"
+        "t0 = time.process_time()\n"
+        "while time.process_time() - t0 < 1.5: pass  # 1.5 s of CPU: the backlog\n"
+        "print('drained', flush=True)\n"))
+    group = ProcessGroup(out=io.StringIO())
+    (draining,) = started(group, "draining")
+    codes = group.stop(grace=0.3)
+    assert codes == {"draining": 0} and "drained" in draining.lines
+    assert group.stop_seconds["draining"] >= 1.5
+
+
 def test_a_node_stuck_on_its_way_out_prints_where_before_it_is_killed(on_path: Path) -> None:
     """SIGINT is taken, the node then hangs (as in a close that never returns): SIGABRT shows where."""
     script(on_path, "stuck_node", (

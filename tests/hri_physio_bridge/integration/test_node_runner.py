@@ -1,4 +1,4 @@
-"""The ROS parameters a node declares: read-only unless the option is applied at run time."""
+"""run_node: the ROS parameters a node declares (read-only unless applied at run time), and its exit."""
 
 from __future__ import annotations
 
@@ -50,3 +50,43 @@ def test_a_node_that_does_not_apply_a_dynamic_option_refuses_its_change(ros_cont
     finally:
         spinner.close()
         node.destroy_node()
+
+
+NODE_SCRIPT = """
+import sys, threading, time
+import rclpy
+from hri_physio_bridge import node_runner
+from hri_physio_bridge.config import NodeConfig, option
+
+class Options(NodeConfig):
+    status: int = option(3, "the exit status", ge=0)
+
+class Node(node_runner.ManagedNode):
+    def __init__(self, config):
+        super().__init__("teardown_test")
+        self.config = self.declare_config(config)
+    def run(self, stop):
+        print("worked", flush=True)
+        return self.config.status
+
+if sys.argv[1] == "hang":
+    node_runner.TEARDOWN_TIMEOUT = 0.5
+    rclpy.try_shutdown = lambda: time.sleep(3600)  # a middleware teardown that never ends
+sys.exit(node_runner.run_node("teardown_test", Options, Node, argv=sys.argv[2:]))
+"""
+
+
+@pytest.mark.parametrize("mode", ["hang", "normal"])
+def test_a_stuck_middleware_teardown_is_bounded_and_keeps_the_exit_status(mode: str, tmp_path) -> None:
+    import subprocess
+    import sys
+
+    script = tmp_path / "node.py"
+    script.write_text(NODE_SCRIPT)
+    done = subprocess.run([sys.executable, str(script), mode, "--status", "4"], capture_output=True,
+                          text=True, timeout=120, stdin=subprocess.DEVNULL)
+    assert done.returncode == 4, done.stderr
+    assert done.stdout == "worked\n"
+    said = ("teardown_test: warning: the ROS 2 middleware did not shut down within 0.5 s; "
+            "exiting with status 4")
+    assert (said in done.stderr) == (mode == "hang"), done.stderr

@@ -170,3 +170,24 @@ def test_after_a_lost_answer_is_given_up_later_answered_commands_hold_nothing() 
         guard.command_answered()
         assert guard.limit(21.5 + k) is None
     assert guard.holds == {ROBOT: 1}
+
+
+def test_a_restarted_streamer_counting_from_zero_again_still_settles_requests() -> None:
+    """The streamer's status reports running totals; a restart starts them at 0 again. Its answers
+    count on top of the old ones, so later requests are settled, not held until given up."""
+    wall = Wall()
+    guard = ClockGuard(reply_lag=1.0, max_hold=5.0, monotonic=wall)
+    for k in range(3):
+        guard.media_requested(10.0 + k)
+        guard.media_settled(k + 1)
+    assert guard.limit(13.0) is None
+    guard.media_settled(0)  # the restarted streamer's first status
+    guard.media_requested(20.0)
+    assert guard.limit(20.0) == pytest.approx(21.0)  # not answered yet
+    guard.media_settled(1)
+    assert guard.limit(20.0) is None and not guard.holds.get(MEDIA)
+    guard.media_settled(1)  # the same count again settles nothing more
+    guard.media_requested(30.0)
+    assert guard.limit(30.0) == pytest.approx(31.0)
+    guard.media_settled(2)
+    assert guard.limit(30.0) is None

@@ -147,6 +147,18 @@ def test_volume_and_media(robot_side) -> None:
     assert p.wait_event("audio")["name"] == "calm.wav"
     assert p.send("set video intro.mp4")["ok"]
     assert p.wait_event("video")["name"] == "intro.mp4"
+    assert p.send("set audio calm2.wav")["ok"]
+    # A streamer that starts now (a restart) finds the last request of each kind latched.
+    from std_msgs.msg import String
+
+    from hri_physio_bridge import topics
+    from hri_physio_bridge.qos import latched_qos
+
+    late: dict[str, list[str]] = {"audio": [], "video": []}
+    for kind, topic in (("audio", topics.AUDIO_CURRENT), ("video", topics.VIDEO_CURRENT)):
+        p.node.create_subscription(String, topic, lambda m, got=late[kind]: got.append(m.data), latched_qos())
+    wanted = {"audio": ["calm2.wav"], "video": ["intro.mp4"]}
+    wait_until(lambda: late == wanted, 30, lambda: f"latched: {late}")
 
 
 @pytest.mark.parametrize(

@@ -43,7 +43,7 @@ class AudioStreamerNode(MediaStreamerNode):
         media_dir = Path(cfg.media_dir).expanduser() if cfg.media_dir else None
         self.attach(AudioPlayer(library, sink, fade=cfg.fade, block=cfg.block, clock=self.now,
                                 on_status=self.publish_status, media_dir=media_dir, log=log),
-                    topics.AUDIO_REQUEST, cfg.status_rate)
+                    topics.AUDIO_REQUEST, topics.AUDIO_CURRENT, cfg.status_rate)
         if cfg.initial:
             self.player.request(cfg.initial)
 

@@ -11,7 +11,7 @@ from std_msgs.msg import String
 
 from audio_video_streamers.status import MediaStatus, State
 from hri_physio_bridge.node_runner import ManagedNode
-from hri_physio_bridge.qos import command_qos, event_qos
+from hri_physio_bridge.qos import command_qos, event_qos, latched_qos
 
 
 class MediaPlayer(Protocol):
@@ -32,6 +32,11 @@ class MediaStreamerNode(ManagedNode):
     The subclass builds its player (with ``clock=self.now`` and ``on_status=self.publish_status``) and
     hands it to :meth:`attach`, which subscribes the request topic and publishes the status at
     ``status_rate``. Every status message carries the node's name; the last one says STOPPED.
+
+    A streamer that starts late or is restarted mid-session has missed the requests sent before it
+    matched: it plays the latched current request (``current_topic``), unless a request reached it
+    first. Nothing is requested twice: the latched request is only ever taken by a streamer that
+    has had none.
     """
 
     player: MediaPlayer
@@ -40,10 +45,12 @@ class MediaStreamerNode(ManagedNode):
         super().__init__(prog, **kwargs)
         self._publish_lock = threading.Lock()  # the player's thread and the executor both publish
         self.status_pub = self.create_publisher(String, status_topic, event_qos())
+        self._requested = False  # a request (or the latched current one) was taken
 
-    def attach(self, player: MediaPlayer, request_topic: str, status_rate: float) -> None:
+    def attach(self, player: MediaPlayer, request_topic: str, current_topic: str, status_rate: float) -> None:
         self.player = player
         self.create_subscription(String, request_topic, self._on_request, command_qos())
+        self.create_subscription(String, current_topic, self._on_current, latched_qos())
         self.create_timer(1.0 / status_rate, lambda: self.publish_status(self.player.status()))
 
     def now(self) -> float:
@@ -51,7 +58,14 @@ class MediaStreamerNode(ManagedNode):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def _on_request(self, msg: String) -> None:
+        self._requested = True
         self.player.request(msg.data)
+
+    def _on_current(self, msg: String) -> None:
+        if not self._requested:  # both callbacks run on the one executor thread
+            self._requested = True
+            self.get_logger().info(f"resuming the current request {msg.data!r} (started after it was sent)")
+            self.player.request(msg.data)
 
     def publish_status(self, status: MediaStatus) -> None:
         data = status.as_dict()

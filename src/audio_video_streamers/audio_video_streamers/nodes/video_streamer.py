@@ -52,7 +52,7 @@ class VideoStreamerNode(MediaStreamerNode):
             on_preview=self.publish_preview, log=log,
             media_dir=Path(cfg.media_dir).expanduser() if cfg.media_dir else None,
         )
-        self.attach(player, topics.VIDEO_REQUEST, cfg.status_rate)
+        self.attach(player, topics.VIDEO_REQUEST, topics.VIDEO_CURRENT, cfg.status_rate)
         if cfg.follow_audio:
             self.create_subscription(String, topics.AUDIO_STATUS, self._on_audio_status, event_qos())
         player.request(cfg.initial)
