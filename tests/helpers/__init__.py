@@ -70,6 +70,25 @@ def publish_burst(publisher, messages, timeout: float = 60.0) -> None:
                 time.sleep(0.01)
 
 
+def run_to_end(command: list[str], timeout: float, **kwargs) -> subprocess.CompletedProcess[str]:
+    """``subprocess.run`` for a session: output (stdout and stderr together) as text; past ``timeout``
+    it gets SIGINT and 60 s to stop its nodes and write its summary before SIGKILL, and the result says
+    ``timed out`` on its last line (returncode as it ended)."""
+    proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            stdin=subprocess.DEVNULL, text=True, **kwargs)
+    try:
+        out, _ = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGINT)
+        try:
+            out, _ = proc.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            out, _ = proc.communicate()
+        out += f"\n(timed out after {timeout:g} s: stopped with SIGINT)"
+    return subprocess.CompletedProcess(command, proc.returncode, out, None)
+
+
 def session_env(**extra: str) -> dict[str, str]:
     """The environment for an ``hri_physio_session`` under test, plus ``extra``.
 
@@ -117,10 +136,17 @@ class NodeProcess:
             ) from None
 
     def wait(self, timeout: float = 30.0) -> int:
+        """The exit status; after ``timeout`` a failure, once SIGINT let the process say what it was doing
+        (a session writes its summary and stops its nodes) and, if need be, SIGKILL ended it."""
         try:
             return self.proc.wait(timeout)
         except subprocess.TimeoutExpired:
-            self.proc.kill()
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(60)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
             raise AssertionError(f"process still running after {timeout} s:\n{self.output}") from None
 
     def __enter__(self) -> NodeProcess:

@@ -34,13 +34,12 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
-import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
-from helpers import session_env
+from helpers import run_to_end, session_env
 from helpers.routines import TEN_MINUTES, short_routine
 from helpers.session_bags import failed_nodes_logs
 from hri_physio_bridge import topics
@@ -112,8 +111,7 @@ def session(tmp_path_factory: pytest.TempPathFactory, session_tag: str) -> Path:
                "--speed", f"{SPEED:g}", "--no-ecg", "--no-report", "--age", f"{AGE:g}",
                "--participant-seed", str(PARTICIPANT_SEED),
                "--device-id", f"SIM{session_tag}e2e", "--out", str(out)]
-    run = subprocess.run(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                         text=True, timeout=400, cwd=out, env=session_env())
+    run = run_to_end(command, timeout=400, cwd=out, env=session_env())
     assert run.returncode == 0, failed_nodes_logs(run.stdout, out)
     (folder,) = [p for p in out.iterdir() if p.is_dir()]  # the session's
     summary = json.loads((folder / "summary.json").read_text())

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 import yaml
 
-from helpers import ROOT, session_env
+from helpers import ROOT, run_to_end, session_env
 from helpers.session_bags import failed_nodes_logs
 
 pytestmark = [pytest.mark.ros, pytest.mark.lsl]
@@ -45,8 +45,7 @@ def demo(tmp_path_factory: pytest.TempPathFactory, session_tag: str) -> tuple[Ru
     out = tmp_path_factory.mktemp("demo")
     command = ["bash", str(ROOT / "scripts" / "demo"), "--out", str(out / "sessions"), "--device-id",
                f"SIM{session_tag}"]
-    run = subprocess.run(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                         text=True, timeout=280, cwd=out, env=session_env())
+    run = run_to_end(command, timeout=280, cwd=out, env=session_env())
     folders = re.findall(r"^\[session\] session folder: (\S+)$", run.stdout, re.M)
     assert len(folders) == 1, run.stdout
     return run, out / folders[0]
