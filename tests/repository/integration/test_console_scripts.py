@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from helpers import ROOT
+from helpers import ROOT, own_lines
 
 BIN = Path(sys.prefix) / "bin"
 
@@ -69,7 +69,7 @@ def _one_line_error(result: subprocess.CompletedProcess[str], script: str, *word
     output = result.stdout + result.stderr
     assert result.returncode == 2, output
     assert "Traceback" not in output, output
-    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    lines = [line for line in own_lines(result.stderr) if line.strip()]
     assert len(lines) == 1 and lines[0].startswith(f"{script}: error:"), output
     for word in words:
         assert word in lines[0], output
