@@ -239,11 +239,16 @@ def plan_session(options: SessionConfig, folder: SessionFolder, device_id: str,
         listeners += [(topics.QT_COMMANDS, PARTICIPANT), (topics.AUDIO_STATUS, PARTICIPANT)]
     if record:
         # The recorder subscribes to a topic once it discovers it: the session starts only once it records
-        # the topics whose first messages matter (the coach's session_start, the first commands).
+        # every topic a node of the session publishes from its start (the coach's session_start, the
+        # first commands and replies, the streamers' and the mock's first statuses, the processor's
+        # outputs). The sample frames are held by their receivers until the recorder listens.
         capture = f"{RECORDER}_capture"
-        recorded = [topics.COACH_EVENTS, topics.COACH_STATE, topics.QT_COMMANDS, topics.AUDIO_STATUS,
-                    topics.SESSION_EVENTS]
+        recorded = [topics.COACH_EVENTS, topics.COACH_STATE, topics.QT_COMMANDS, topics.QT_REPLIES,
+                    topics.QT_MOCK_EVENTS, topics.AUDIO_STATUS, topics.VIDEO_STATUS, topics.VIDEO_PREVIEW,
+                    topics.AUDIO_CURRENT, topics.VIDEO_CURRENT, topics.SESSION_EVENTS]
         if not options.polar:
             recorded.append(topics.PARTICIPANT_STATE)
+        if not options.no_ecg:
+            recorded += [topics.POLAR_H10_ECG_HR, f"{topics.POLAR_H10_ECG}/status"]
         listeners += [(topic, capture) for topic in recorded]
     return SessionPlan(coach, duration, device_id, tuple(nodes), tuple(listeners))

@@ -219,12 +219,18 @@ def test_the_restart_limit_is_checked(value: int, message: str) -> None:
         SessionConfig.from_mapping({"max_restarts": value}, "command line")
 
 
-def test_the_session_starts_once_the_recorder_records_what_its_first_messages_need(tmp_path: Path) -> None:
+def test_the_session_starts_once_the_recorder_records_every_publisher_from_its_start(tmp_path: Path) -> None:
     from hri_physio_bridge import topics
 
     p, _ = plan(tmp_path)
     capture = {topic for topic, node in p.listeners if node == "physio_recorder_capture"}
-    assert capture == {topics.COACH_EVENTS, topics.COACH_STATE, topics.QT_COMMANDS, topics.AUDIO_STATUS,
-                       topics.PARTICIPANT_STATE, topics.SESSION_EVENTS}
+    robot_and_media = {topics.QT_COMMANDS, topics.QT_REPLIES, topics.QT_MOCK_EVENTS, topics.AUDIO_STATUS,
+                       topics.VIDEO_STATUS, topics.VIDEO_PREVIEW, topics.AUDIO_CURRENT, topics.VIDEO_CURRENT}
+    coach = {topics.COACH_EVENTS, topics.COACH_STATE, topics.SESSION_EVENTS, topics.PARTICIPANT_STATE}
+    processor = {topics.POLAR_H10_ECG_HR, "/physio/polar_h10/ecg/status"}
+    assert capture == robot_and_media | coach | processor
+    p, _ = plan(tmp_path, no_ecg=True)
+    assert {topic for topic, node in p.listeners if node == "physio_recorder_capture"} == (
+        robot_and_media | coach)
     p, _ = plan(tmp_path, no_record=True)
     assert all(node != "physio_recorder_capture" for _topic, node in p.listeners)
