@@ -3,6 +3,11 @@
 A streamer produces media "due" at clock times and waits for them here. The clock may run at
 any speed, stand still (a paused simulation, or no /clock yet) or jump; waits sleep in short
 wall-time steps so a faster clock is followed and a stop ends the wait at once.
+
+A clock that moves only in steps (ROS time under sim time: one step per /clock message) comes
+with :class:`ClockTicks`, told of each step: a pacer then sleeps until the next step instead of
+polling a clock that stands still (which, with a due time just past the current step, meant
+sleeping a fraction of a millisecond over and over until the next /clock).
 """
 
 from __future__ import annotations
@@ -20,20 +25,51 @@ def wait_on_event(seconds: float, stop: threading.Event) -> bool:
     return stop.wait(seconds)
 
 
+#: Longest wait for a clock step (wall s): a stop is seen within it, and so is a clock whose steps
+#: were not told (a bound only: steps end the wait).
+TICK_WAIT = 0.1
+
+
+class ClockTicks:
+    """Told each time a stepping clock moved (:meth:`tick`, from any thread); a pacer waits for it."""
+
+    def __init__(self) -> None:
+        self._moved = threading.Event()
+        self.count = 0
+
+    def tick(self) -> None:
+        self.count += 1
+        self._moved.set()
+
+    def clear(self) -> None:
+        self._moved.clear()
+
+    def wait(self, seconds: float) -> bool:
+        """Until the next tick since :meth:`clear`, at most ``seconds``; True when it came."""
+        return self._moved.wait(seconds)
+
+
 class Pacer:
-    """Waits until an injected clock reaches a time (``sleep``: how to pass time, injectable for tests)."""
+    """Waits until an injected clock reaches a time (``sleep``: how to pass time, injectable for tests).
+
+    With ``ticks`` the clock moves only when they tick (sim time), and a wait sleeps until the tick.
+    """
 
     def __init__(self, clock: Clock = time.monotonic, *, poll: float = 0.02,
-                 sleep: Sleeper = wait_on_event) -> None:
-        self.clock, self.poll, self.sleep = clock, poll, sleep
+                 sleep: Sleeper = wait_on_event, ticks: ClockTicks | None = None) -> None:
+        self.clock, self.poll, self.sleep, self.ticks = clock, poll, sleep, ticks
 
     def wait_until(self, due: float, stop: threading.Event) -> bool:
         """Sleep until ``clock() >= due``; False when ``stop`` was set first."""
         while not stop.is_set():
+            if self.ticks is not None:
+                self.ticks.clear()  # before reading the clock: a step from now on ends the wait below
             remaining = due - self.clock()
             if remaining <= 0:
                 return True
-            if self.sleep(min(remaining, self.poll), stop):
+            if self.ticks is not None:
+                self.ticks.wait(TICK_WAIT)
+            elif self.sleep(min(remaining, self.poll), stop):
                 return False
         return False
 

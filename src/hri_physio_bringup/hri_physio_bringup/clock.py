@@ -58,6 +58,13 @@ class SimClock:
         #: Wall seconds the clock lost to limits (what it would have run at ``speed``, less what it ran).
         self.held_wall = 0.0
 
+    def next_step_in(self) -> float:
+        """Wall seconds until the next clock value is due at ``speed`` (0: due now). With a limit in
+        force it comes later, never sooner: a loop that sleeps this long misses no step."""
+        elapsed = max(0.0, self._monotonic() - self._wall)
+        ahead = self.t + CLOCK_STEP - (self._position + elapsed * self.speed)
+        return max(0.0, ahead / self.speed)
+
     def due_steps(self, limit: float | None = None, hard: bool = False) -> list[float]:
         """The clock values to publish now to keep up with the wall clock: at real time past ``limit``,
         or (``hard``) not past it at all."""

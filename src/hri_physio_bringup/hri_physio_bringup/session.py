@@ -88,6 +88,10 @@ TAIL = 10.0
 #: Wall seconds the system must look ready before 'start': publishers match their subscribers.
 SETTLE = 2.0
 CLOCK_DEPTH = 1000
+#: Wall seconds between two rounds of the launcher's loop (clock, supervision, progress): when the
+#: clock's next step is due, but at least LOOP_MIN (at high speed steps go out in small bursts, as
+#: they always did) and at most LOOP_MAX (deaths and a stop are seen within it).
+LOOP_MIN, LOOP_MAX = 0.01, 0.1
 
 
 class ClockAndWatcher(BackgroundNode):
@@ -314,6 +318,18 @@ def start_nodes(group: ProcessGroup, plan: SessionPlan, folder: SessionFolder) -
         group.start(node.name, node.script, node.argv(conf), echo=False, log_path=folder.log_file(node.name))
 
 
+def drive(done: Callable[[], bool], clock: SimClock, stop: threading.Event) -> bool:
+    """Call ``done`` whenever the clock's next step is due (see LOOP_MIN, LOOP_MAX) until it holds
+    (True) or a stop (False, or ``done()`` once more when the stop came during a pause)."""
+    while True:
+        if done():
+            return True
+        if stop.is_set():
+            return False
+        if stop.wait(min(LOOP_MAX, max(LOOP_MIN, clock.next_step_in()))):
+            return done()
+
+
 def wait_for_system(watcher: ClockAndWatcher, group: ProcessGroup, clock: SimClock, view: SessionView,
                     stop: threading.Event, timeout: float) -> str | None:
     """Drive the clock until the robot side listens and heart rate reaches the coach's input."""
@@ -434,7 +450,7 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
                 return True
             return coach.returncode is not None
 
-        wait_until(finished, None, stop=stop, poll=0.01)
+        drive(finished, clock, stop)
         out.wall = time.monotonic() - wall0
         if coach.returncode not in (None, 0):
             out.fail(f"{COACH} ended with status {coach.returncode}: {coach.error_line()}")
@@ -446,7 +462,7 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
                 watcher.advance(clock)
                 return supervision.step(clock.t, coach) or clock.t >= end
 
-            wait_until(tail_done, None, stop=stop, poll=0.01)
+            drive(tail_done, clock, stop)
         return clock
     finally:
         if out.stopped_by:

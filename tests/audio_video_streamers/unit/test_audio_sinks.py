@@ -19,10 +19,42 @@ from audio_video_streamers.audio.sinks import (
     load_sounddevice,
     open_sink,
 )
+from audio_video_streamers.pacing import ClockTicks
 from helpers.media import VirtualClock, capture_logger
 
 RATE = 44100
 BLOCK = np.zeros((1024, 2), dtype=np.float32)
+
+
+class SimClockSteps(ClockTicks):
+    """Sim time in 0.125-s steps: each wait for a tick is one /clock message arriving."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.t = 100.0
+        self.waits = 0
+
+    def __call__(self) -> float:
+        return self.t
+
+    def wait(self, seconds: float) -> bool:
+        self.waits += 1
+        self.t += 0.125
+        self.tick()
+        return True
+
+
+def test_on_a_stepping_clock_the_null_sink_waits_for_each_step_not_in_short_polls() -> None:
+    clock = SimClockSteps()
+    polls: list[float] = []
+    sink = NullSink(RATE, 2, clock, lead=0.0, ticks=clock,
+                    sleep=lambda seconds, stop: polls.append(seconds) or False)
+    stop = threading.Event()
+    for _ in range(43):  # 43 blocks of 1024 frames: 0.9985 s of audio
+        assert sink.write(BLOCK, stop)
+    assert polls == []  # never a wall-time poll on a clock that moves only in steps
+    assert clock.waits == 8 == clock.count  # one wait per step: 0.9985 s is due within 8 steps of 0.125 s
+    assert sink.frames_played == 43 * 1024
 
 
 def test_null_sink_consumes_samples_at_the_clock_rate() -> None:

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import types
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -123,6 +125,73 @@ def test_activities_follow_the_audio_tempo_unless_the_request_names_one(tmp_path
     assert rig.player.status().tempo == 100.0
     rig.show("relaxing")
     assert rig.player.status().tempo is None
+
+
+def stepping_sim_clock(wall: VirtualClock, step: float = 0.125) -> Callable[[], float]:
+    """Sim time at real time as /clock gives it: it moves in steps of ``step`` s (binary fractions here,
+    so frame times fall exactly on steps)."""
+    return lambda: 5000.0 + math.floor(wall() / step) * step
+
+
+def test_an_unchanged_picture_is_not_drawn_again(tmp_path: Path) -> None:
+    """Sim time at 1x moves in steps: of the 4 frames a step spans, only the first is drawn."""
+    wall = VirtualClock(0.0)
+    display = OffscreenDisplay()
+    player = VideoPlayer(display, size=SIZE, fps=32.0, clock=stepping_sim_clock(wall), wall=wall,
+                         sleep=wall.sleep)
+    stop = threading.Event()
+    player.request("marching")
+    times, pictures = [], []
+    for _ in range(32):
+        assert player.step(stop)
+        times.append(player.status().elapsed)
+        pictures.append(display.last.copy())
+    assert display.shown == 32
+    assert player.drawn == len(set(times)) <= 10  # one drawing per clock step, not per frame
+    for elapsed, picture in zip(times, pictures, strict=True):  # and each frame is its time's picture
+        assert np.array_equal(picture, render.draw_activity(render.blank(*SIZE), "marching", elapsed, 120.0))
+    player.set_audio_tempo(90.0)  # a new tempo is a new picture at the same time
+    before = player.drawn
+    player.step(stop)
+    assert player.drawn == before + 1
+
+
+def test_an_unwatched_display_draws_only_the_previews(tmp_path: Path) -> None:
+    def run(display: OffscreenDisplay) -> tuple[VideoPlayer, list[tuple[float, np.ndarray]]]:
+        wall = VirtualClock(0.0)
+        previews: list[tuple[float, np.ndarray]] = []
+        player = VideoPlayer(display, size=SIZE, fps=30.0, preview_rate=1.0, clock=wall, wall=wall,
+                             sleep=wall.sleep, on_preview=lambda frame, t: previews.append((t, frame)))
+        player.request("splash")
+        for _ in range(90):  # 3 s
+            assert player.step(threading.Event())
+        return player, previews
+
+    watched, seen = run(OffscreenDisplay())
+    unwatched, unseen = run(OffscreenDisplay(watched=False))
+    assert unwatched.drawn == len(unseen) == len(seen) == 4 and watched.drawn == 90
+    assert [t for t, _ in unseen] == [t for t, _ in seen]  # the same previews, pixel for pixel
+    assert all(np.array_equal(a, b) for (_, a), (_, b) in zip(unseen, seen, strict=True))
+    assert unwatched.display.shown == watched.display.shown == 90  # at the same pace
+    assert unwatched.status().extra["shown"] == 90
+    assert isinstance(open_display("offscreen", capture_logger("d")[0]), OffscreenDisplay)
+    assert not open_display("offscreen", capture_logger("d")[0]).watched
+
+
+def test_an_unwatched_display_still_reads_every_frame_of_a_file(tmp_path: Path) -> None:
+    """A file is decoded in order (its position is in the status): its frames are read unwatched too."""
+    write_video(tmp_path / "twelve.avi", 12, 24.0)
+    clock = VirtualClock()
+    display = OffscreenDisplay(watched=False)
+    player = VideoPlayer(display, size=SIZE, preview_rate=0.0, clock=clock, wall=clock, sleep=clock.sleep,
+                         media_dir=tmp_path)
+    player.request("twelve.avi")
+    stop = threading.Event()
+    frames = []
+    for _ in range(14):
+        player.step(stop)
+        frames.append(player.status().extra["frame"])
+    assert frames == [*range(12), 0, 1] and index_of_gray(display.last) == 1
 
 
 # ----------------------------------------------------------------------------------------------

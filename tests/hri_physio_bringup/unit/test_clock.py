@@ -25,6 +25,21 @@ def test_sim_clock_steps_keep_up_with_the_wall_clock_at_its_speed() -> None:
     assert clock.due_steps() == []
 
 
+def test_the_sim_clock_says_when_its_next_step_is_due() -> None:
+    """The launcher sleeps until then: at 1x once per step, not 100 times a second."""
+    wall = Wall()
+    clock = SimClock(start=1000.0, speed=1.0, monotonic=wall)
+    assert clock.next_step_in() == pytest.approx(CLOCK_STEP)
+    wall.t += 0.04
+    assert clock.next_step_in() == pytest.approx(CLOCK_STEP - 0.04)
+    wall.t += 0.07  # due since 0.01 s
+    assert clock.next_step_in() == 0.0
+    assert len(clock.due_steps()) == 1
+    assert clock.next_step_in() == pytest.approx(CLOCK_STEP - 0.01)
+    fast = SimClock(start=0.0, speed=30.0, monotonic=wall)
+    assert fast.next_step_in() == pytest.approx(CLOCK_STEP / 30)
+
+
 def test_past_its_limit_the_clock_runs_at_real_time_and_goes_on_at_its_speed_without_catching_up() -> None:
     wall = Wall()
     clock = SimClock(start=0.0, speed=10.0, monotonic=wall)

@@ -23,7 +23,7 @@ from typing import ClassVar, Protocol
 import numpy as np
 import soundfile as sf
 
-from audio_video_streamers.pacing import Clock, Pacer, Schedule, Sleeper, wait_on_event
+from audio_video_streamers.pacing import Clock, ClockTicks, Pacer, Schedule, Sleeper, wait_on_event
 
 
 class SinkError(RuntimeError):
@@ -47,9 +47,10 @@ class NullSink:
     kind = "null"
 
     def __init__(self, rate: int, channels: int, clock: Clock, *, lead: float = 0.1,
-                 max_lag: float = 1.0, sleep: Sleeper = wait_on_event) -> None:
+                 max_lag: float = 1.0, sleep: Sleeper = wait_on_event,
+                 ticks: ClockTicks | None = None) -> None:
         self.rate, self.channels = rate, channels
-        self.schedule = Schedule(Pacer(clock, sleep=sleep), lead=lead, max_lag=max_lag)
+        self.schedule = Schedule(Pacer(clock, sleep=sleep, ticks=ticks), lead=lead, max_lag=max_lag)
         self.frames_played = 0
 
     def write(self, block: np.ndarray, stop: threading.Event) -> bool:
@@ -156,7 +157,7 @@ class RecordingSink:
 
 def open_sink(mode: str, rate: int, channels: int, clock: Clock, log: logging.Logger, *,
               device: str = "", block: int = 1024, latency: float = 0.1, record_wav: str = "",
-              record_format: str = "pcm16",
+              record_format: str = "pcm16", ticks: ClockTicks | None = None,
               backend_loader: Callable[[], ModuleType] = load_sounddevice) -> AudioSink:
     """The sink the options ask for (see the module docstring); :class:`SinkError` if it cannot open."""
     sink: AudioSink | None = None
@@ -177,7 +178,7 @@ def open_sink(mode: str, rate: int, channels: int, clock: Clock, log: logging.Lo
             else:
                 log.info(f"playing on the sound device {sink.name}")
     if sink is None:
-        sink = NullSink(rate, channels, clock, lead=latency)
+        sink = NullSink(rate, channels, clock, lead=latency, ticks=ticks)
     if record_wav:
         sink = RecordingSink(sink, Path(record_wav).expanduser(), record_format)
         log.info(f"recording what is played to {record_wav}")

@@ -36,7 +36,7 @@ class AudioStreamerNode(MediaStreamerNode):
         log = logic_logger(self.get_name(), self.get_logger())
         sink = open_sink(cfg.sink, cfg.rate, cfg.channels, self.now, log, device=cfg.device,
                          block=cfg.block, latency=cfg.latency, record_wav=cfg.record_wav,
-                         record_format=cfg.record_format)
+                         record_format=cfg.record_format, ticks=self.clock_ticks())
         cache = StretchCache(Path(cfg.cache_dir).expanduser() if cfg.cache_dir else None, log)
         library = AudioLibrary(cfg.rate, cfg.channels, declick=cfg.declick, stretch_cache=cache,
                                memory_bytes=cfg.memory_cache_mb * 2**20, log=log)

@@ -7,8 +7,11 @@ import threading
 from dataclasses import replace
 from typing import Any, Protocol
 
+from rclpy.clock import JumpThreshold
+from rclpy.duration import Duration
 from std_msgs.msg import String
 
+from audio_video_streamers.pacing import ClockTicks
 from audio_video_streamers.status import MediaStatus, State
 from hri_physio_bridge.node_runner import ManagedNode
 from hri_physio_bridge.qos import command_qos, event_qos, latched_qos
@@ -52,6 +55,17 @@ class MediaStreamerNode(ManagedNode):
         self.create_subscription(String, request_topic, self._on_request, command_qos())
         self.create_subscription(String, current_topic, self._on_current, latched_qos())
         self.create_timer(1.0 / status_rate, lambda: self.publish_status(self.player.status()))
+
+    def clock_ticks(self) -> ClockTicks | None:
+        """Under use_sim_time, ticks told of every step of ROS time (each /clock message, after the
+        time is set), so the player's pacing waits for the step; None on wall time."""
+        if not self.get_parameter("use_sim_time").value:
+            return None
+        ticks = ClockTicks()
+        every = JumpThreshold(min_forward=Duration(nanoseconds=1), min_backward=Duration(nanoseconds=-1))
+        clock = self.get_clock()
+        self._jump_handle = clock.create_jump_callback(every, post_callback=lambda _jump: ticks.tick())
+        return ticks
 
     def now(self) -> float:
         """The node's ROS time in seconds (follows /clock under use_sim_time)."""

@@ -50,7 +50,7 @@ class VideoStreamerNode(MediaStreamerNode):
             display, size=(cfg.width, cfg.height), fps=cfg.fps, preview_rate=cfg.preview_rate,
             default_tempo=cfg.tempo, title=cfg.title, clock=self.now, on_status=self.publish_status,
             on_preview=self.publish_preview, log=log,
-            media_dir=Path(cfg.media_dir).expanduser() if cfg.media_dir else None,
+            media_dir=Path(cfg.media_dir).expanduser() if cfg.media_dir else None, ticks=self.clock_ticks(),
         )
         self.attach(player, topics.VIDEO_REQUEST, topics.VIDEO_CURRENT, cfg.status_rate)
         if cfg.follow_audio:

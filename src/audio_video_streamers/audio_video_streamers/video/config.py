@@ -11,7 +11,7 @@ from hri_physio_bridge.config import NodeConfig, option
 class VideoStreamerConfig(NodeConfig):
     display: Literal["auto", "window", "offscreen"] = option(
         "auto", "auto = a window when a display exists, else offscreen; window = a window or fail; "
-        "offscreen = render without showing (same pace, same previews)")
+        "offscreen = shown nowhere: only the frames the previews need are drawn (same pace, same previews)")
     fullscreen: bool = option(False, "show the window full screen")
     width: int = option(640, "frame width (files are scaled to fit, aspect kept)", unit="px", ge=64, le=7680)
     height: int = option(480, "frame height", unit="px", ge=48, le=4320)

@@ -27,23 +27,36 @@ class DisplayError(RuntimeError):
 class Display(Protocol):
     kind: str  # "window" | "offscreen"
     shown: int
+    #: False: nobody sees the frames, so the player draws only those a preview needs and passes the
+    #: others by with :meth:`skip` (they count as shown: the pace is the same).
+    watched: bool
 
     def show(self, frame: np.ndarray) -> None: ...
+
+    def skip(self) -> None: ...
 
     def close(self) -> None: ...
 
 
 class OffscreenDisplay:
-    """Keeps the last frame (what a screen would show) and counts frames."""
+    """Keeps the last frame (what a screen would show) and counts frames.
+
+    ``watched`` False is the node's offscreen display: nobody looks at it, so only the frames that
+    go into a preview are drawn and :attr:`last` is the last of those.
+    """
 
     kind = "offscreen"
 
-    def __init__(self) -> None:
+    def __init__(self, watched: bool = True) -> None:
         self.last: np.ndarray | None = None
         self.shown = 0
+        self.watched = watched
 
     def show(self, frame: np.ndarray) -> None:
         self.last = frame
+        self.shown += 1
+
+    def skip(self) -> None:
         self.shown += 1
 
     def close(self) -> None:
@@ -54,6 +67,7 @@ class WindowDisplay:
     """An OpenCV window (``backend`` is the cv2 module, a fake in tests)."""
 
     kind = "window"
+    watched = True
 
     def __init__(self, backend: ModuleType = cv2, *, fullscreen: bool = False,
                  name: str = WINDOW_NAME) -> None:
@@ -71,6 +85,9 @@ class WindowDisplay:
         self.backend.waitKey(1)  # lets the window system draw it
         self.shown += 1
 
+    def skip(self) -> None:  # a window is watched: the player never skips a frame of it
+        self.shown += 1
+
     def close(self) -> None:
         with contextlib.suppress(self.backend.error):
             self.backend.destroyWindow(self.name)
@@ -82,18 +99,19 @@ def has_display_server(env: Mapping[str, str] = os.environ) -> bool:
 
 def open_display(mode: str, log: logging.Logger, *, fullscreen: bool = False,
                  env: Mapping[str, str] = os.environ, backend: ModuleType = cv2) -> Display:
-    """The display ``mode`` asks for: ``auto``, ``window`` or ``offscreen``."""
+    """The display ``mode`` asks for: ``auto``, ``window`` or ``offscreen`` (an unwatched one: the
+    player draws only what its previews need)."""
     if mode == "offscreen":
-        return OffscreenDisplay()
+        return OffscreenDisplay(watched=False)
     if not has_display_server(env):
         if mode == "window":
             raise DisplayError("display window: no display server (DISPLAY / WAYLAND_DISPLAY not set)")
         log.info("no display: rendering offscreen")
-        return OffscreenDisplay()
+        return OffscreenDisplay(watched=False)
     try:
         return WindowDisplay(backend, fullscreen=fullscreen)
     except DisplayError as exc:
         if mode == "window":
             raise
         log.info(f"{exc}: rendering offscreen")
-        return OffscreenDisplay()
+        return OffscreenDisplay(watched=False)

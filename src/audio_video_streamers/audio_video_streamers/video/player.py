@@ -6,6 +6,11 @@ to the preview callback ``preview_rate`` times per second of clock time. Request
 from any thread and never dropped; a request that cannot be shown is reported (``error``
 status, one log line) and the current source goes on.
 
+A built-in screen is a picture of its time (and tempo): it is drawn again only when that changed
+(under sim time the clock moves in steps of 0.1 s, so at real time two frames in three would be
+the same picture), and for a display nobody watches (the node's offscreen one) only the frames
+that go into a preview are drawn at all; the others are counted as shown, at the same pace.
+
 Frames follow the clock (ROS time: sim time under use_sim_time), but are never shown faster
 than ``WALL_RATE_CAP`` x the frame rate in wall time: a simulation at 30x real time shows the
 picture due at each moment, skipping frames, instead of rendering 30 times as many.
@@ -23,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from audio_video_streamers.pacing import Clock, Pacer, Sleeper, wait_on_event
+from audio_video_streamers.pacing import Clock, ClockTicks, Pacer, Sleeper, wait_on_event
 from audio_video_streamers.requests import RequestError, parse_video_request, take_queued, unexpected_failure
 from audio_video_streamers.status import MediaStatus, RequestLedger, State
 from audio_video_streamers.video.display import Display
@@ -43,13 +48,15 @@ class VideoPlayer:
                  clock: Clock = time.time, wall: Clock = time.monotonic,
                  on_status: StatusCallback | None = None, on_preview: PreviewCallback | None = None,
                  media_dir: Path | None = None,
-                 log: logging.Logger | None = None, sleep: Sleeper = wait_on_event) -> None:
+                 log: logging.Logger | None = None, sleep: Sleeper = wait_on_event,
+                 ticks: ClockTicks | None = None) -> None:
         self.display, self.size, self.fps, self.preview_rate = display, size, fps, preview_rate
         self.default_tempo, self.title, self.clock, self.media_dir = default_tempo, title, clock, media_dir
         self.on_status = on_status or (lambda status: None)
         self.on_preview = on_preview or (lambda frame, t: None)
         self.log = log or logging.getLogger(__name__)
-        self.pacer, self.wall_pacer = Pacer(clock, sleep=sleep), Pacer(wall, sleep=sleep)
+        # ``ticks``: the clock is sim time, told of each /clock step (the wall clock never is).
+        self.pacer, self.wall_pacer = Pacer(clock, sleep=sleep, ticks=ticks), Pacer(wall, sleep=sleep)
         self._next_due: float | None = None  # clock time of the next frame
         self._last_wall: float | None = None
         self.skipped = 0  # frames not shown because the clock ran ahead of the renderer
@@ -63,6 +70,8 @@ class VideoPlayer:
         self._last_now: float | None = None
         self._next_preview: float | None = None
         self.previews = 0
+        self._drawn: tuple[object, np.ndarray] | None = None  # a pure source's last picture, by its key
+        self.drawn = 0  # pictures a pure source drew
 
     # --- inputs (any thread) -----------------------------------------------------------------
     def request(self, text: str) -> None:
@@ -92,6 +101,7 @@ class VideoPlayer:
             old = self.source
             with self._lock:
                 self.source, self._source_start, self._elapsed = source, None, 0.0
+                self._drawn = None
             self.ledger.settle(text, "started")
             if old is not None:
                 old.close()
@@ -141,22 +151,50 @@ class VideoPlayer:
         self._next_due += period  # type: ignore[operator]
         if self.source is None:
             return True
+        preview = self._preview_due(now, period)
         with self._lock:
             if self._source_start is None:  # a new source starts with the frame shown now
                 self._source_start = now
             self._elapsed = max(0.0, now - self._source_start)
-            frame = self.source.frame(self._elapsed)
-        self.display.show(frame)
-        if self.preview_rate > 0 and (self._next_preview is None or now >= self._next_preview - period / 2):
-            # Due every 1/preview_rate s of clock time, on the frame nearest that time.
-            step = 1.0 / self.preview_rate
-            self._next_preview = (now if self._next_preview is None else self._next_preview) + step
-            if self._next_preview <= now:  # fell behind (a fast clock): the next one from now
-                self._next_preview = now + step
+            source = self.source
+            # Nobody sees an unwatched display: a frame is drawn only for a preview (or to keep a
+            # file's decoder in step), the others are passed by at the same pace.
+            frame = (self._draw(source, self._elapsed)
+                     if self.display.watched or preview or not source.pure else None)
+        if frame is None:
+            self.display.skip()
+        else:
+            self.display.show(frame)
+        if preview:
+            assert frame is not None
             self.previews += 1
             self.on_preview(frame.copy(), now)
         self._emit_if_changed()
         return True
+
+    def _preview_due(self, now: float, period: float) -> bool:
+        """Whether the frame at ``now`` goes into a preview: one every 1/preview_rate s of clock time,
+        on the frame nearest that time."""
+        if self.preview_rate <= 0:
+            return False
+        if self._next_preview is not None and now < self._next_preview - period / 2:
+            return False
+        step = 1.0 / self.preview_rate
+        self._next_preview = (now if self._next_preview is None else self._next_preview) + step
+        if self._next_preview <= now:  # fell behind (a fast clock): the next one from now
+            self._next_preview = now + step
+        return True
+
+    def _draw(self, source: VideoSource, elapsed: float) -> np.ndarray:
+        """The source's frame at ``elapsed``. A pure source's picture is drawn again only when its
+        key changed: under sim time the clock moves in steps, so frames in between show the same."""
+        if not source.pure:
+            return source.frame(elapsed)
+        key = (source, source.picture_key(elapsed))
+        if self._drawn is None or key != self._drawn[0]:
+            self._drawn = (key, source.frame(elapsed))
+            self.drawn += 1
+        return self._drawn[1]
 
     def run(self, stop: threading.Event) -> int:
         while self.step(stop):

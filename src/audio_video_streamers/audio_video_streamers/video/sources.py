@@ -23,6 +23,11 @@ class VideoSource(Protocol):
     request: str
     kind: str
     fps: float
+    #: True: ``frame(elapsed)`` depends on ``elapsed`` and :meth:`picture_key` only (no state), so a
+    #: frame nobody sees need not be drawn, and one whose key did not change need not be drawn again.
+    pure: bool
+
+    def picture_key(self, elapsed: float) -> object: ...
 
     def frame(self, elapsed: float) -> np.ndarray: ...
 
@@ -38,6 +43,8 @@ class ScreenSource:
     audio streamer plays, or a default), read on every frame so it follows the music.
     """
 
+    pure = True
+
     def __init__(self, request: VideoRequest, size: tuple[int, int], fps: float, *,
                  tempo: Callable[[], float], title: str = "HRI Physio") -> None:
         self.request, self.kind, self.name, self.fps = request.text, request.kind, request.name, fps
@@ -49,6 +56,10 @@ class ScreenSource:
         if self.kind != "activity":
             return None
         return self._fixed_tempo if self._fixed_tempo is not None else self._tempo()
+
+    def picture_key(self, elapsed: float) -> object:
+        """What the picture at ``elapsed`` is drawn from: the same key, the same picture."""
+        return elapsed, self.tempo
 
     def frame(self, elapsed: float) -> np.ndarray:
         if self.kind == "splash":
@@ -83,6 +94,7 @@ class FileVideo:
     """A video file played at its own frame rate, looping; frames decoded in order, skipped when late."""
 
     kind = "file"
+    pure = False  # frames are decoded in order: each one is read (its position is the status's)
 
     def __init__(self, request: VideoRequest, size: tuple[int, int],
                  capture: Callable[[str], Any] = cv2.VideoCapture) -> None:
@@ -125,6 +137,9 @@ class FileVideo:
         if self.frames:
             return divmod(want, self.frames)
         return 0, want
+
+    def picture_key(self, elapsed: float) -> object:
+        return self._target(elapsed)
 
     def frame(self, elapsed: float) -> np.ndarray:
         loops, index = self._target(elapsed)

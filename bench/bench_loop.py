@@ -1,0 +1,360 @@
+"""Benchmark the whole closed loop at real time: CPU of every node, and the input path's latency.
+
+Runs ``hri_physio_session --speed 1`` (the built-in defaults: simulated participant, receivers,
+processor, coach, controller, mock robot, audio and video streamers, recorder) and, once the
+session has started (the launcher says ``system ready``) and ``--settle`` seconds have passed,
+reads utime + stime from /proc/<pid>/stat of the launcher and of every node process at the start
+and at the end of a ``--seconds`` window (default 60: the first minute of the routine, its
+calibration phase: seated rest, relaxing music and video, reminders). It prints each process's
+CPU time over that window as a share of one core, and the total.
+
+Latency of the input path: this process opens its own LSL inlet on the strap's heart-rate stream
+(``PolarH10/<device>/HR``) and subscribes, like the coach, to the coach's heart-rate input
+(``/physio/polar_h10/hr``, the same QoS). Each sample carries its strap stamp; it is matched by
+that stamp, and the latency is the time (``pylsl.local_clock``, both ends in this process) from
+its arrival on LSL to its arrival on the coach's topic: LSL push -> physio_receiver -> ROS 2 ->
+the coach's input. p50 and p99 over the window. Not in the figure: the hop from the strap's push
+to an inlet (localhost TCP, the same for this inlet as for the receiver's), and the coach's own
+executor (this process's subscriber stands in for the coach's, with the same QoS).
+
+Side by side in one run: ``--baseline-ref REF`` first runs the same session on the sources of git
+commit REF (``git archive`` into a temporary folder, put first on PYTHONPATH; the console scripts
+and the installed environment are the same), then on the working tree. ``--save FILE`` writes
+the figures as JSON; ``--baseline FILE`` prints a saved run next to this one instead.
+``--demo`` also runs the 23-minute session at the default 30x and reports its wall time.
+
+Run:  source scripts/env.sh && python bench/bench_loop.py --baseline-ref HEAD~5
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import uuid
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pylsl
+
+HERE = Path(__file__).resolve()
+ROOT = HERE.parent.parent
+TICK = os.sysconf("SC_CLK_TCK")
+LAUNCHER = "hri_physio_session"
+#: Nodes whose work is waiting for messages or timers: each should cost next to nothing.
+WAITERS = ("hri_physio_session", "qt_physio_coach", "qt_controller", "mock_qt_robot", "hr_receiver")
+GOALS = {"total": 20.0, "waiter": 1.0, "video_streamer": 4.0, "neurokit_processor": 3.0,
+         "latency_p99_ms": 5.0, "demo_wall_s": 55.0}
+
+
+@dataclass
+class LoopResult:
+    label: str
+    seconds: float
+    cpu: dict[str, float] = field(default_factory=dict)  # % of one core, by node
+    latency_ms: list[float] = field(default_factory=list)
+    demo_wall_s: float | None = None
+
+    @property
+    def total(self) -> float:
+        return sum(self.cpu.values())
+
+    def p(self, q: float) -> float:
+        return float(np.percentile(self.latency_ms, q)) if self.latency_ms else float("nan")
+
+
+# -- /proc ---------------------------------------------------------------------------------------
+
+
+def cpu_seconds(pid: int) -> float | None:
+    """utime + stime of ``pid`` in seconds (None: gone)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            stat = f.read()
+    except OSError:
+        return None
+    fields = stat[stat.rindex(")") + 2:].split()  # after "pid (comm) "
+    return (int(fields[11]) + int(fields[12])) / TICK
+
+
+def descendants(pid: int) -> list[int]:
+    """Every process below ``pid`` (children of children too), from /proc/<pid>/task/*/children."""
+    out: list[int] = []
+    todo = [pid]
+    while todo:
+        p = todo.pop()
+        for task in Path(f"/proc/{p}/task").glob("*"):
+            try:
+                kids = [int(k) for k in (task / "children").read_text().split()]
+            except OSError:
+                continue
+            out.extend(kids)
+            todo.extend(kids)
+    return out
+
+
+def node_name(pid: int) -> str:
+    """The session's name for a node process: its ``configs/<name>.yaml``, else its script's name."""
+    try:
+        argv = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+    except OSError:
+        return f"pid {pid}"
+    for arg in argv:
+        m = re.search(rb"configs/([\w.-]+)\.yaml$", arg)
+        if m:
+            return m.group(1).decode()
+    scripts = [Path(a.decode(errors="replace")).name for a in argv[1:2] + argv[:1] if a]
+    return scripts[0] if scripts else f"pid {pid}"
+
+
+# -- the latency probe ---------------------------------------------------------------------------
+
+
+class LatencyProbe:
+    """Arrival of each strap HR sample on LSL and on the coach's input topic, by its own stamp."""
+
+    def __init__(self, device: str, topic: str) -> None:
+        import rclpy
+        from std_msgs.msg import Float64MultiArray
+
+        from hri_physio_bridge.qos import frame_qos
+        from hri_physio_bridge.ros_frames import msg_to_frame
+        from hri_physio_bridge.ros_tools import ExecutorThread
+
+        self.lsl_arrival: dict[float, float] = {}  # strap stamp -> arrival on LSL (local_clock)
+        self.ros_arrival: dict[float, float] = {}  # strap stamp -> arrival on the coach's topic
+        self.measuring = False
+        self.stop_lsl = False
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node(f"bench_loop_{uuid.uuid4().hex[:6]}", context=self.context)
+
+        def on_frame(msg: Float64MultiArray) -> None:
+            now = pylsl.local_clock()
+            stamps = msg_to_frame(msg).timestamps
+            with self._lock:
+                if self.measuring:
+                    for t in stamps:
+                        self.ros_arrival[round(float(t), 6)] = now
+
+        self.node.create_subscription(Float64MultiArray, topic, on_frame, frame_qos())
+        self._spinner = ExecutorThread(self.node, context=self.context)
+        self._thread = threading.Thread(target=self._pull, args=(f"PolarH10/{device}/HR",), daemon=True)
+        self._thread.start()
+
+    def _pull(self, name: str) -> None:
+        found: list = []
+        while not found and not self._stop.is_set():
+            found = pylsl.resolve_byprop("name", name, 1, 1.0)
+        if not found:
+            return
+        inlet = pylsl.StreamInlet(found[0], max_buflen=60)
+        inlet.open_stream(30)
+        while not self._stop.is_set():
+            _sample, stamp = inlet.pull_sample(timeout=0.5)
+            if stamp:
+                now = pylsl.local_clock()
+                with self._lock:
+                    if self.measuring and not self.stop_lsl:
+                        self.lsl_arrival[round(float(stamp), 6)] = now
+        inlet.close_stream()
+
+    def latencies(self) -> list[float]:
+        """Seconds from LSL to the coach's topic of each sample seen on both, in stamp order."""
+        with self._lock:
+            both = sorted(set(self.lsl_arrival) & set(self.ros_arrival))
+            return [self.ros_arrival[t] - self.lsl_arrival[t] for t in both]
+
+    def close(self) -> None:
+        import rclpy
+
+        self._stop.set()
+        self._thread.join(3.0)
+        self._spinner.close()
+        self.node.destroy_node()
+        rclpy.shutdown(context=self.context)
+
+
+# -- one session ---------------------------------------------------------------------------------
+
+
+def source_tree(ref: str, into: Path) -> dict[str, str]:
+    """The sources of git commit ``ref`` under ``into``; the environment that runs them."""
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", ref, "src"], check=True,
+                             capture_output=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(into)], input=archive, check=True)
+    packages = sorted(str(p.parent) for p in (into / "src").glob("*/setup.cfg"))
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([*packages, env["PYTHONPATH"]] if env.get("PYTHONPATH") else packages)
+    return env
+
+
+def run_loop(label: str, seconds: float, settle: float, env: dict[str, str] | None = None) -> LoopResult:
+    env = dict(os.environ) if env is None else env
+    device = "BENCH" + uuid.uuid4().hex[:6].upper()
+    out = Path(tempfile.mkdtemp(prefix="bench_loop_"))
+    probe = LatencyProbe(device, "/physio/polar_h10/hr")
+    cmd = [shutil.which(LAUNCHER, path=env["PATH"]) or LAUNCHER, "--speed", "1", "--out", str(out),
+           "--device-id", device, "--no-report"]
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    ready = threading.Event()
+    lines: list[str] = []
+
+    def read() -> None:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            lines.append(line.rstrip())
+            if "system ready" in line:
+                ready.set()
+
+    threading.Thread(target=read, daemon=True).start()
+    result = LoopResult(label, seconds)
+    try:
+        deadline = time.monotonic() + 300
+        while not ready.wait(0.5):
+            if proc.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f"{label}: the session did not start:\n" + "\n".join(lines[-20:]))
+        time.sleep(settle)
+        pids = {proc.pid: LAUNCHER, **{p: node_name(p) for p in descendants(proc.pid)}}
+        start = {pid: cpu_seconds(pid) for pid in pids}
+        with probe._lock:
+            probe.measuring = True
+        wall0 = time.monotonic()
+        time.sleep(seconds)
+        end = {pid: cpu_seconds(pid) for pid in pids}
+        wall = time.monotonic() - wall0
+        with probe._lock:
+            probe.stop_lsl = True  # samples taken from now on are not counted
+        for pid, name in pids.items():
+            a, b = start[pid], end[pid]
+            if a is None or b is None:
+                print(f"warning: {name} (pid {pid}) was not there for the whole window", file=sys.stderr)
+                continue
+            result.cpu[name] = result.cpu.get(name, 0.0) + (b - a) / wall * 100.0
+        # Samples that reached the coach's topic until 2 s after the window are still counted.
+        time.sleep(2.0)
+        result.latency_ms = [x * 1e3 for x in probe.latencies()]
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(90)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+        probe.close()
+        shutil.rmtree(out, ignore_errors=True)
+    bad = [line for line in lines if "node exit statuses" in line or ": error:" in line]
+    if bad:  # a node that hung on its way out, or crashed: the figures are not to be trusted
+        print(f"warning: {label}: " + "; ".join(bad), file=sys.stderr)
+    return result
+
+
+def run_demo(env: dict[str, str] | None = None) -> float:
+    """Wall seconds of the whole 23-minute session at the default speed (what scripts/demo runs)."""
+    out = Path(tempfile.mkdtemp(prefix="bench_demo_"))
+    try:
+        subprocess.run([LAUNCHER, "--policy", "predictive", "--out", str(out), "--no-report"], env=env,
+                       check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        summary = json.loads(next(out.glob("*/summary.json")).read_text())
+        return float(summary["wall_seconds"])
+    finally:
+        shutil.rmtree(out, ignore_errors=True)
+
+
+# -- output --------------------------------------------------------------------------------------
+
+
+def fmt(x: float | None, unit: str = "") -> str:
+    return "-" if x is None or x != x else f"{x:.1f}{unit}"
+
+
+def ratio(new: float | None, old: float | None) -> str:
+    return "-" if not new or not old or new != new or old != old else f"{new / old:.2f}"
+
+
+def table(now: LoopResult, base: LoopResult | None) -> None:
+    names = sorted(set(now.cpu) | set(base.cpu if base else {}),
+                   key=lambda n: -(base.cpu.get(n, 0.0) if base else now.cpu.get(n, 0.0)))
+    print(f"\n== CPU over {now.seconds:g} s at 1x, % of one core ==")
+    print(f"{'process':<22} {'baseline':>9} {'now':>7} {'now/base':>9}")
+    for n in names:
+        old = base.cpu.get(n) if base else None
+        print(f"{n:<22} {fmt(old):>9} {fmt(now.cpu.get(n)):>7} {ratio(now.cpu.get(n), old):>9}")
+    old_total = base.total if base else None
+    print(f"{'total':<22} {fmt(old_total):>9} {fmt(now.total):>7} {ratio(now.total, old_total):>9}")
+    print("\n== Input path: strap HR sample on LSL -> the coach's input topic ==")
+    print(f"{'':<22} {'baseline':>9} {'now':>7} {'now/base':>9}")
+    for q in (50, 99):
+        old = base.p(q) if base else None
+        print(f"{f'p{q} (ms)':<22} {fmt(old):>9} {fmt(now.p(q)):>7} {ratio(now.p(q), old):>9}")
+    print(f"{'samples':<22} {len(base.latency_ms) if base else '-':>9} {len(now.latency_ms):>7}")
+    if now.demo_wall_s is not None or (base and base.demo_wall_s is not None):
+        old = base.demo_wall_s if base else None
+        print(f"\n23-minute session at 30x, wall s: baseline {fmt(old)}, now {fmt(now.demo_wall_s)}")
+
+
+def goals(now: LoopResult) -> None:
+    def line(what: str, value: float | None, limit: float, unit: str) -> None:
+        met = "-" if value is None else ("MET" if value <= limit else "NOT MET")
+        print(f"  {what:<44} {fmt(value, unit):>9}  (<= {limit:g}{unit}) {met}")
+
+    print("\n== Goals (now) ==")
+    line("whole loop at 1x", now.total, GOALS["total"], " %")
+    worst = max((now.cpu.get(n, 0.0), n) for n in WAITERS)
+    line(f"worst waiting node ({worst[1]})", worst[0], GOALS["waiter"], " %")
+    line("video_streamer", now.cpu.get("video_streamer"), GOALS["video_streamer"], " %")
+    line("neurokit_processor", now.cpu.get("neurokit_processor"), GOALS["neurokit_processor"], " %")
+    line("LSL -> coach input p99", now.p(99), GOALS["latency_p99_ms"], " ms")
+    line("23-min session at 30x (wall)", now.demo_wall_s, GOALS["demo_wall_s"], " s")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--seconds", type=float, default=60.0,
+                        help="measured window, wall = session seconds at 1x (default 60)")
+    parser.add_argument("--settle", type=float, default=5.0,
+                        help="seconds after the session start before the window (default 5)")
+    parser.add_argument("--baseline-ref", metavar="REF",
+                        help="also run the sources of git commit REF first, and print both side by side")
+    parser.add_argument("--baseline", metavar="FILE", help="a run saved with --save, printed side by side")
+    parser.add_argument("--save", metavar="FILE", help="write this run's figures as JSON")
+    parser.add_argument("--demo", action="store_true",
+                        help="also time the 23-minute session at 30x (with --baseline-ref: both)")
+    args = parser.parse_args()
+    print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}, python "
+          f"{sys.version.split()[0]}, ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '(a free one)')}")
+    base: LoopResult | None = None
+    if args.baseline:
+        data = json.loads(Path(args.baseline).read_text())
+        base = LoopResult(**data)
+    elif args.baseline_ref:
+        with tempfile.TemporaryDirectory(prefix="bench_loop_src_") as tmp:
+            env = source_tree(args.baseline_ref, Path(tmp))
+            print(f"baseline: {args.baseline_ref} ({LAUNCHER} --speed 1, {args.seconds:g} s)", flush=True)
+            base = run_loop(args.baseline_ref, args.seconds, args.settle, env)
+            if args.demo:
+                base.demo_wall_s = run_demo(env)
+    print(f"now: the working tree ({LAUNCHER} --speed 1, {args.seconds:g} s)", flush=True)
+    now = run_loop("now", args.seconds, args.settle)
+    if args.demo:
+        now.demo_wall_s = run_demo()
+    if args.save:
+        Path(args.save).write_text(json.dumps(asdict(now), indent=1))
+    table(now, base)
+    goals(now)
+
+
+if __name__ == "__main__":
+    main()
