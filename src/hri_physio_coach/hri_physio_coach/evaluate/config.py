@@ -8,7 +8,7 @@ from hri_physio_bridge.config import NodeConfig, option
 from hri_physio_coach.participant.models import MODEL_NAMES
 from hri_physio_coach.policies.registry import POLICY_NAMES
 
-DEFAULT_POLICIES = ["static", "threshold", "fuzzy", "predictive"]
+DEFAULT_POLICIES = ["static", "threshold", "fuzzy", "predictive", "adaptive"]
 
 
 class EvaluateConfig(NodeConfig):

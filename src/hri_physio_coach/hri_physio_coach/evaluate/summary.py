@@ -123,6 +123,30 @@ def goals_table(summary: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def models_table(summaries: Sequence[tuple[str, pd.DataFrame]]) -> str:
+    """Markdown: one row per (participant model, policy) of ``hri_physio_evaluate`` summaries, with the
+    goals each row misses (for README and docs/EVALUATION.md: generated, not typed)."""
+    head = ("| model | policy | median | p10 | mean | mean, reachable | s above HRR70 (p90) | >= threshold "
+            "| adaptations / 10 min (median) | unreachable | goals missed |")
+    lines = [head, "|" + "---|" * 11]
+    for model, summary in summaries:
+        for _, r in summary.iterrows():
+            met = goals_met(r)
+            missed = [c for c, _, _ in GOALS if not met[c]]
+            if r["policy"] == "threshold":
+                missed = [c for c in missed if c != "at_least_threshold_share"]
+
+            def pct(x: float) -> str:
+                return "-" if not math.isfinite(x) else f"{100 * x:.1f} %"
+            lines.append(
+                f"| {model} | {r['policy']} | {pct(r['in_zone_median'])} | {pct(r['in_zone_p10'])} | "
+                f"{pct(r['in_zone_mean'])} | {pct(r['in_zone_mean_reachable'])} | "
+                f"{r['above_hrr70_s_p90']:.0f} | "
+                f"{pct(r['at_least_threshold_share'])} | {r['adaptations_per_10min_median']:.1f} | "
+                f"{pct(r['unreachable_share'])} | {', '.join(missed) if missed else 'none'} |")
+    return "\n".join(lines)
+
+
 def winner(summary: pd.DataFrame) -> str:
     """The policy with the most conditioning time in zone (mean; median breaks ties)."""
     best = summary.sort_values(["in_zone_mean", "in_zone_median"], ascending=False)
