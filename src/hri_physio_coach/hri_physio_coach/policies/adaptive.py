@@ -57,9 +57,12 @@ class AdaptivePolicy(PredictivePolicy):
         self.gap_acc = 0.0  # sigma-delta integral of (predicted settled HR - target) * s
         self.gap_last: float | None = None
         self.gap_said = False
+        self.trusted = 120.0  # s of a level performed after which its own fit is trusted over its label
+        self.now = 0.0  # time of the rule update being decided
 
     # --- the identified response ------------------------------------------------------------------
     def fit_now(self, t: float) -> Estimate | None:  # type: ignore[override]
+        self.now = t
         self.fit = self.model.fit(t)
         return self.fit
 
@@ -87,11 +90,24 @@ class AdaptivePolicy(PredictivePolicy):
         scaled = self._scaled(level)
         return None if scaled is None else scaled[0]
 
+    def seen_for(self, level: Hashable, now: float) -> float:
+        """Seconds ``level`` has been performed so far."""
+        settings = self.model.settings
+        total = 0.0
+        for i, (t0, lv, _) in enumerate(settings):
+            if lv == level:
+                t1 = settings[i + 1][0] if i + 1 < len(settings) else now
+                total += max(0.0, min(t1, now) - t0)
+        return total
+
     def gain(self, level: Hashable) -> float | None:
-        """The level's gain, never below that of a level with a lower stated cost (a harder label is not
-        predicted easier: a level seen briefly, early, can fit low)."""
+        """The level's gain; until it has been performed for ``trusted`` s, never below that of a level with
+        a lower stated cost (a level seen briefly, early, can fit low; a long-seen one is what it is:
+        some people march harder than they step)."""
         g = self._raw_gain(level)
         if g is None or not isinstance(level, int | float) or self.fit is None:
+            return g
+        if self.seen_for(level, self.now) >= self.trusted:
             return g
         easier = [lv for lv in self.fit.levels if isinstance(lv, int | float) and lv < level]
         for lv in easier:
@@ -238,8 +254,9 @@ class AdaptivePolicy(PredictivePolicy):
         now = self.predict(inp, c, current)
         if self.gap is not None and current == self.gap[0]:
             return self._gap_step(inp, c)
-        # Easier by label, whatever the model predicts (it just missed): the model ranks them.
-        lower = [s for s in self.candidates(c) if self.nominal(c, s) < self.nominal(c, current) - 1e-9]
+        # Easier by label, whatever the model predicts (it just missed), or predicted easier: the model ranks.
+        lower = [s for s in self.candidates(c) if self.nominal(c, s) < self.nominal(c, current) - 1e-9
+                 or ((m := self.predict(inp, c, s)) is not None and now is not None and m < now - 1.0)]
         scored = self._scored(inp, c, lower)
         if not scored:
             return self._out_of_reach(inp, c, now, inp.t - self.last_change)
@@ -250,7 +267,8 @@ class AdaptivePolicy(PredictivePolicy):
         """The stall guard: the best setting predicted higher than the current one."""
         current = self.current(c)
         now = self.predict(inp, c, current)
-        higher = [s for s in self.candidates(c) if self.nominal(c, s) > self.nominal(c, current) + 1e-9]
+        higher = [s for s in self.candidates(c) if self.nominal(c, s) > self.nominal(c, current) + 1e-9
+                  or ((m := self.predict(inp, c, s)) is not None and now is not None and m > now + 1.0)]
         scored = self._scored(inp, c, higher)
         if not scored:
             return self._out_of_reach(inp, c, now, inp.t - self.last_change)
@@ -312,8 +330,9 @@ class AdaptivePolicy(PredictivePolicy):
             return Proposal(0, f"holding: {since:.0f} s since the last change < {self.hold:g} s; "
                                f"{ahead_text}")
         best = self.best(inp, c)
-        # Never re-plan against the heart rate seen: below the zone nothing easier, above it nothing harder.
-        if inp.hr < zone.low and self.nominal(c, best) < self.nominal(c, current):
+        # Never re-plan against the heart rate seen: below the zone nothing predicted easier.
+        best_pred = self.predict(inp, c, best)
+        if inp.hr < zone.low and best_pred is not None and pred is not None and best_pred < pred:
             best = current
         if best != current or self._gap_pair(inp, c) is not None:
             return self._choose(inp, c, "re-plan")
