@@ -123,12 +123,14 @@ def make_cohort(n: int, seed: int, age_range: tuple[float, float] = (20.0, 50.0)
 
 def variants(people: list[ParticipantParams], assumptions: tuple[Assumption, ...] = ASSUMPTIONS
              ) -> list[tuple[str, list[ParticipantParams]]]:
-    """The cohort with one assumed parameter set to one end of its range for everyone."""
+    """The cohort with one assumed parameter set to one end of its range for everyone (only the
+    parameters the cohort's participant model uses)."""
     out = []
     known = {f.name for f in dataclasses.fields(people[0])} if people else set()
+    uses = model_info(people[0].model).uses if people else None
     for a in assumptions:
-        if a.name not in known:
-            continue
+        if a.name not in known or (uses is not None and a.name not in uses):
+            continue  # a parameter this participant model does not have or does not use
         for value in (a.low, a.high):
             out.append((f"{a.name}={value:g}", [replace(p, **{a.name: value}) for p in people]))
     return out

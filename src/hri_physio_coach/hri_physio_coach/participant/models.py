@@ -383,15 +383,22 @@ class ModelInfo:
     params: type[ParticipantParams]
     sample: Callable[[int, int, tuple[float, float]], list[ParticipantParams]]
     about: str
+    #: The shared (ParticipantParams) fields the model's heart uses; None: all of them. A sensitivity
+    #: sweep moves only these (moving a field the model ignores would show nothing).
+    uses: frozenset[str] | None = None
 
 
 MODELS: dict[str, ModelInfo] = {
     "standard": ModelInfo("standard", ParticipantParams, sample_population,  # type: ignore[arg-type]
                           "the project's model: fast 35 % + slow part, ACSM stepping"),
     "vagal": ModelInfo("vagal", VagalParams, sample_vagal,  # type: ignore[arg-type]
-                       "fast vagal part capped at the intrinsic HR, slow part, linear drift, cadence cap"),
+                       "fast vagal part capped at the intrinsic HR, slow part, linear drift, cadence cap",
+                       frozenset({"tempo_compliance", "gesture_gain", "tau_on", "dead_time", "marching_mets",
+                                  "arm_work", "step_height"})),
     "vo2drive": ModelInfo("vo2drive", Vo2Params, sample_vo2drive,  # type: ignore[arg-type]
-                          "VO2 kinetics (phase I/II, slow component) -> HR by Swain's %HRmax-%VO2max"),
+                          "VO2 kinetics (phase I/II, slow component) -> HR by Swain's %HRmax-%VO2max",
+                          frozenset({"tempo_compliance", "gesture_gain", "calibration_offset", "arm_work",
+                                     "step_height"})),
 }
 MODEL_NAMES = tuple(MODELS)
 

@@ -157,3 +157,12 @@ def test_models_are_selectable_for_the_evaluation_and_the_node() -> None:
     with pytest.raises(ValueError, match="unknown participant model"):
         model_info("nope")
     assert sample_vo2drive(5, 2) == sample_vo2drive(5, 2)  # seeded
+
+
+def test_the_sensitivity_sweep_moves_only_what_a_model_uses() -> None:
+    from hri_physio_coach.evaluate.cohort import variants
+
+    standard = {name.split("=")[0] for name, _ in variants(make_cohort(2, 1))}
+    vo2 = {name.split("=")[0] for name, _ in variants(make_cohort(2, 1, model="vo2drive"))}
+    assert {"tau_on", "tau_fast", "drift_amplitude"} <= standard
+    assert vo2 == {"tempo_compliance", "gesture_gain", "calibration_offset"}
