@@ -14,10 +14,14 @@ easiest setting) and changes how it learns and decides:
   far its band pokes out of the zone (out of the top counts ``over_weight`` times more).
 * **Overshoot guard.** When the window's heart rate is above the zone, or the fitted trajectory of the
   current setting crosses the zone's top within ``horizon`` s, the policy acts at this rule update,
-  whatever the hold: it moves to an easier setting (the one scored best among those predicted lower
-  than the current one). It never holds while heart rate is above the zone.
+  whatever the hold: it moves to an easier setting (the one scored best among those easier by label
+  or predicted lower than the current one). It never holds while heart rate is above the zone.
 * **Stall guard.** Heart rate below the zone for ``stall`` s after the last change, and not predicted
-  to get in within ``horizon`` s: a harder setting, even if the model predicted this one in the zone.
+  to get in within ``horizon`` s: a harder setting (by label or by prediction), even if the model
+  predicted this one in the zone. A re-plan never picks a setting predicted lower while HR is below.
+* **Labels until seen.** A level's gain is kept at least that of a level with a lower stated cost until
+  it has been performed for ``trusted`` (120) s; after that its own fit counts (some people march harder
+  than they step).
 * **Gap strategy.** When no single setting is predicted inside the zone but one settles above and one
   below, the two alternate at the rule updates with a sigma-delta duty cycle on their predicted
   settled heart rates, so the mean sits at the target; the first switch carries the ``zone_gap``
