@@ -1,10 +1,10 @@
 """How fast hri_physio_evaluate runs: one session per policy, then a whole cohort in parallel.
 
-Goals (issue 14): one 23-minute session <= 0.5 s; 200 people x 5 policies <= 3 min on this
-machine's cores. Prints measured figures side by side with the goals; asserts nothing (the
+Goals (issues 14, 24): one 23-minute session <= 0.5 s; 200 people x 5 policies x 3 participant models
+<= 3 min on this machine's cores. Prints measured figures side by side with the goals; asserts nothing (the
 machine may be shared).
 
-    python bench/bench_evaluate.py                 # 10 sessions per policy, then 200 people
+    python bench/bench_evaluate.py                 # 10 sessions per policy, then 200 people x 3 models
     python bench/bench_evaluate.py --cohort 50     # a smaller cohort
     python bench/bench_evaluate.py --sessions-only
 """
@@ -20,9 +20,10 @@ from hri_physio_coach.evaluate.cohort import make_cohort
 from hri_physio_coach.evaluate.evaluation import tasks_for
 from hri_physio_coach.evaluate.runner import default_jobs, run_task, run_tasks
 
-POLICIES = ["static", "threshold", "fuzzy", "predictive"]
+POLICIES = ["static", "threshold", "fuzzy", "predictive", "adaptive"]
+MODELS = ["standard", "vagal", "vo2drive"]
 SESSION_GOAL_S = 0.5
-COHORT_GOAL_S = 180.0  # 200 people x 5 policies
+COHORT_GOAL_S = 180.0  # 200 people x 5 policies x 3 models
 SESSION_LENGTH_S = 23 * 60
 
 
@@ -49,6 +50,7 @@ def main() -> None:
     parser.add_argument("--cohort", type=int, default=200, help="people in the parallel run")
     parser.add_argument("--jobs", type=int, default=0, help="worker processes (0: every core)")
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--models", default=",".join(MODELS), help="participant models, comma-separated")
     parser.add_argument("--sessions-only", action="store_true", help="skip the parallel cohort run")
     args = parser.parse_args()
     jobs = args.jobs or default_jobs()
@@ -61,16 +63,19 @@ def main() -> None:
         print(f"  {policy:<12} {wall:>8.3f} {cpu:>8.3f} {SESSION_LENGTH_S / wall:>12.0f}")
     if args.sessions_only:
         return
-    people = make_cohort(args.cohort, args.seed)
-    tasks = tasks_for(people, POLICIES, args.seed)
+    models = [m for m in args.models.split(",") if m]
+    tasks = []
+    for model in models:
+        tasks += tasks_for(make_cohort(args.cohort, args.seed, model=model), POLICIES, args.seed)
     start = time.perf_counter()
     run_tasks(tasks, jobs=jobs, progress=False)
     wall = time.perf_counter() - start
     per = wall / len(tasks)
-    projected = per * 200 * 5
-    print(f"\n{args.cohort} people x {len(POLICIES)} policies on {jobs} processes: {wall:.1f} s wall "
-          f"({per * 1000:.0f} ms per session, {len(tasks) / wall:.1f} sessions/s)")
-    print(f"  projected 200 people x 5 policies: {projected:.0f} s (goal <= {COHORT_GOAL_S:.0f} s, "
+    projected = per * 200 * 5 * 3
+    print(f"\n{args.cohort} people x {len(POLICIES)} policies x {len(models)} models on {jobs} processes: "
+          f"{wall:.1f} s wall ({per * 1000:.0f} ms per session, {len(tasks) / wall:.1f} sessions/s)")
+    print(f"  projected 200 people x 5 policies x 3 models: {projected:.0f} s "
+          f"(goal <= {COHORT_GOAL_S:.0f} s, "
           f"ratio {projected / COHORT_GOAL_S:.2f})")
 
 

@@ -594,6 +594,9 @@ class ExerciseCoach(Listener):
         self.decisions.append(decision)
         self._emit({"t": t, "event": RULE_UPDATE, "inputs": inputs, "decision": decision.as_dict(),
                     "ladder": self.ladder.state()})
+        if decision.notice == act.ZONE_GAP:
+            self._emit({"t": t, "event": act.ZONE_GAP, "hr": decision.hr, "reason": decision.reason,
+                        "ladder_index": decision.index_after, "activity_level": decision.level_after})
         switched = self._apply_level(decision)
         if not switched:
             self._speak_decision(decision)

@@ -121,7 +121,10 @@ class CoachConfig(NodeConfig):
     # --- adaptation ----------------------------------------------------------------------------
     policy: PolicyName = option("threshold", "adaptation policy: threshold (Algorithm 1), fuzzy "
                                 "(Algorithm 2), static (control condition), predictive (acts on the "
-                                "predicted steady-state HR, chooses activity and pace)")
+                                "predicted steady-state HR, chooses activity and pace), adaptive (identifies "
+                                "the "
+                                "person online, banded predictions, overshoot guard, alternates two settings "
+                                "across a gap)")
     seed: int = option(0, "seed of the fuzzy policy's draws and of the random behaviours")
     adapt_refractory: bool = option(False, "no adaptation within adapt_refractory_period of the last one")
     adapt_refractory_period: float = option(60.0, "the refractory period", unit="s", ge=0)

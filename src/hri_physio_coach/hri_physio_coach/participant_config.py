@@ -14,6 +14,7 @@ from pydantic import model_validator
 
 from hri_physio_bridge import topics
 from hri_physio_bridge.config import NodeConfig, option
+from hri_physio_coach.participant.models import MODEL_NAMES, as_model
 from hri_physio_coach.participant.physiology import REST_VO2, ParticipantParams
 
 #: The node's name: the section of a ROS params file that holds its options.
@@ -25,6 +26,9 @@ class ParticipantNodeConfig(NodeConfig):
     """The simulated person (model parameters) and the simulated strap (LSL streams)."""
 
     # --- the person (ParticipantParams) --------------------------------------------------------
+    model: str = option("standard", f"participant model ({', '.join(MODEL_NAMES)}; "
+                        "docs/PARTICIPANT_MODEL.md): "
+                        "the options below are its shared parameters, the model's own keep their defaults")
     age: float = option(_P.age, "age", unit="years", gt=0, le=120)
     female: bool = option(_P.female, "sex for the population model")
     hr_rest: float = option(_P.hr_rest, "resting heart rate", unit="bpm", ge=30)
@@ -46,6 +50,11 @@ class ParticipantNodeConfig(NodeConfig):
     sdnn_rest: float = option(_P.sdnn_rest, "SD of RR intervals at rest", unit="s", ge=0)
     artefact_rate: float = option(_P.artefact_rate, "missed or extra beats in the reported RR (fraction)",
                                   ge=0, le=1)
+    strap_jitter: float = option(_P.strap_jitter, "SD of the jitter on the strap's 1-Hz heart rate",
+                                 unit="bpm",
+                                 ge=0)
+    dropout_rate: float = option(_P.dropout_rate, "share of seconds the strap sends no heart rate",
+                                 ge=0, lt=1)
     reaction_period: float = option(_P.reaction_period, "a new instruction is taken up at the next multiple "
                                     "of this period from the coach's session start (0: at once)", unit="s",
                                     ge=0)
@@ -69,13 +78,17 @@ class ParticipantNodeConfig(NodeConfig):
 
     @model_validator(mode="after")
     def _model_checks(self) -> ParticipantNodeConfig:
+        if self.model not in MODEL_NAMES:
+            raise ValueError(f"model: unknown participant model {self.model!r}; choose from "
+                             f"{', '.join(MODEL_NAMES)}")
         self.params.validate()  # ValueError: reported as a configuration error
         return self
 
     @property
     def params(self) -> ParticipantParams:
         names = {f.name for f in dataclasses.fields(ParticipantParams)}
-        return ParticipantParams(**{k: v for k, v in self.as_dict().items() if k in names})
+        shared = ParticipantParams(**{k: v for k, v in self.as_dict().items() if k in names})
+        return as_model(shared, self.model)
 
     def lsl_name(self, kind: str) -> str:
         """The LSL stream name of ``kind`` (ECG, HR or RR)."""

@@ -1,6 +1,7 @@
 """The simulated cohort: who takes part, their seeds, and the model variants of the sensitivity table.
 
-People come from :func:`~hri_physio_coach.participant.physiology.sample_population` (seeded)
+People come from the participant model's sampler (``--model``, :mod:`~hri_physio_coach.participant.models`;
+the standard one is :func:`~hri_physio_coach.participant.physiology.sample_population`), seeded,
 or from a population file (CSV, one person per row, columns named as the fields of
 :class:`~hri_physio_coach.participant.physiology.ParticipantParams`; missing columns keep
 their defaults). Each person gets two seeds derived from ``--seed`` (numpy ``SeedSequence``
@@ -17,9 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hri_physio_coach.participant.physiology import ParticipantParams, sample_population
-
-_FIELDS = {f.name: f for f in dataclasses.fields(ParticipantParams)}
+from hri_physio_coach.participant.models import model_info
+from hri_physio_coach.participant.physiology import ParticipantParams
 
 
 class PopulationError(ValueError):
@@ -56,8 +56,13 @@ def participant_seeds(seed: int, n: int) -> list[tuple[int, int]]:
     return [tuple(int(x) for x in child.generate_state(2)) for child in children]  # type: ignore[misc]
 
 
-def _value(name: str, text: str, where: str) -> float | bool:
-    kind = _FIELDS[name].type
+def _fields(cls: type[ParticipantParams]) -> dict[str, dataclasses.Field]:  # type: ignore[type-arg]
+    return {f.name: f for f in dataclasses.fields(cls)}
+
+
+def _value(name: str, text: str, where: str,
+           cls: type[ParticipantParams] = ParticipantParams) -> float | bool:
+    kind = _fields(cls)[name].type
     if kind == "bool":
         lowered = text.strip().lower()
         if lowered in ("true", "1", "yes"):
@@ -71,8 +76,10 @@ def _value(name: str, text: str, where: str) -> float | bool:
         raise PopulationError(f"{where}: {name} must be a number, got {text!r}") from None
 
 
-def load_population(path: str | Path) -> list[ParticipantParams]:
-    """People from a CSV file (one per row); :class:`PopulationError` on anything unusable."""
+def load_population(path: str | Path, model: str = "standard") -> list[ParticipantParams]:
+    """People of ``model`` from a CSV file (one per row); :class:`PopulationError` on anything unusable."""
+    cls = model_info(model).params
+    fields = _fields(cls)
     p = Path(path)
     if not p.is_file():
         raise PopulationError(f"population file {p} does not exist")
@@ -84,16 +91,16 @@ def load_population(path: str | Path) -> list[ParticipantParams]:
         raise PopulationError(f"population file {p} is not a readable CSV file: {exc}") from None
     if not rows:
         raise PopulationError(f"population file {p} has no rows (a header line, then one person per line)")
-    unknown = sorted(set(columns) - set(_FIELDS))
+    unknown = sorted(set(columns) - set(fields))
     if unknown:
         raise PopulationError(f"population file {p}: unknown column(s) {', '.join(unknown)}; "
-                              f"known: {', '.join(_FIELDS)}")
+                              f"known: {', '.join(fields)}")
     people = []
     for i, row in enumerate(rows, start=2):
         where = f"population file {p}, line {i}"
         if None in row or any(v is None or not v.strip() for v in row.values()):
             raise PopulationError(f"{where}: every column needs a value")
-        person = ParticipantParams(**{k: _value(k, v, where) for k, v in row.items()})  # type: ignore[arg-type]
+        person = cls(**{k: _value(k, v, where, cls) for k, v in row.items()})  # type: ignore[arg-type]
         try:
             person.validate()
         except ValueError as exc:
@@ -103,22 +110,27 @@ def load_population(path: str | Path) -> list[ParticipantParams]:
 
 
 def make_cohort(n: int, seed: int, age_range: tuple[float, float] = (20.0, 50.0),
-                population: str | Path | None = None) -> list[ParticipantParams]:
-    """``n`` people: sampled with ``seed``, or the first ``n`` of a population file."""
+                population: str | Path | None = None, model: str = "standard") -> list[ParticipantParams]:
+    """``n`` people of participant model ``model``: sampled with ``seed``, or the first ``n`` of a file."""
     if population:
-        people = load_population(population)
+        people = load_population(population, model)
         if len(people) < n:
             raise PopulationError(f"population file {population} has {len(people)} people, fewer than "
                                   f"the cohort of {n}")
         return people[:n]
-    return sample_population(n, seed, age_range)
+    return model_info(model).sample(n, seed, age_range)
 
 
 def variants(people: list[ParticipantParams], assumptions: tuple[Assumption, ...] = ASSUMPTIONS
              ) -> list[tuple[str, list[ParticipantParams]]]:
-    """The cohort with one assumed parameter set to one end of its range for everyone."""
+    """The cohort with one assumed parameter set to one end of its range for everyone (only the
+    parameters the cohort's participant model uses)."""
     out = []
+    known = {f.name for f in dataclasses.fields(people[0])} if people else set()
+    uses = model_info(people[0].model).uses if people else None
     for a in assumptions:
+        if a.name not in known or (uses is not None and a.name not in uses):
+            continue  # a parameter this participant model does not have or does not use
         for value in (a.low, a.high):
             out.append((f"{a.name}={value:g}", [replace(p, **{a.name: value}) for p in people]))
     return out

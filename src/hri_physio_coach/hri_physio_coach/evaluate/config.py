@@ -5,9 +5,10 @@ from __future__ import annotations
 from pydantic import model_validator
 
 from hri_physio_bridge.config import NodeConfig, option
+from hri_physio_coach.participant.models import MODEL_NAMES
 from hri_physio_coach.policies.registry import POLICY_NAMES
 
-DEFAULT_POLICIES = ["static", "threshold", "fuzzy", "predictive"]
+DEFAULT_POLICIES = ["static", "threshold", "fuzzy", "predictive", "adaptive"]
 
 
 class EvaluateConfig(NodeConfig):
@@ -23,6 +24,8 @@ class EvaluateConfig(NodeConfig):
     jobs: int = option(0, "worker processes on this machine (0: one per core)", ge=0)
     scheduler: str = option("", "address of a running Dask distributed scheduler (e.g. tcp://host:8786) "
                             "to run the sessions on instead of local processes")
+    model: str = option("standard", "participant model the cohort is drawn from and simulated with "
+                        f"({', '.join(MODEL_NAMES)}; docs/PARTICIPANT_MODEL.md)")
     population: str = option("", "CSV file of participants, one per row, columns named as the model's "
                              "parameters (age, hr_rest, vo2max, ...); empty: sample the cohort")
     age_min: float = option(20.0, "youngest age of the sampled cohort", unit="years", gt=0, le=120)
@@ -47,6 +50,9 @@ class EvaluateConfig(NodeConfig):
         if unknown:
             raise ValueError(f"policies: unknown policy {', '.join(map(repr, unknown))}; choose from "
                              f"{', '.join(POLICY_NAMES)}")
+        if self.model not in MODEL_NAMES:
+            raise ValueError(f"model: unknown participant model {self.model!r}; choose from "
+                             f"{', '.join(MODEL_NAMES)}")
         if len(set(self.policies)) != len(self.policies):
             raise ValueError(f"policies: each policy once, got {','.join(self.policies)}")
         if not self.age_min < self.age_max:

@@ -16,7 +16,15 @@ from hri_physio_coach.evaluate.config import EvaluateConfig
 from hri_physio_coach.evaluate.plots import plot_in_zone, plot_traces
 from hri_physio_coach.evaluate.runner import Result, Task, run_tasks
 from hri_physio_coach.evaluate.simulation import SessionSpec
-from hri_physio_coach.evaluate.summary import comparisons, sensitivity, summarise, summary_markdown, winner
+from hri_physio_coach.evaluate.summary import (
+    GOALS,
+    comparisons,
+    goals_met,
+    sensitivity,
+    summarise,
+    summary_markdown,
+    winner,
+)
 from hri_physio_coach.participant.physiology import ParticipantParams
 
 IN_ZONE_PLOT, TRACES_PLOT = "in_zone.png", "traces.png"
@@ -52,7 +60,7 @@ def base_coach_options(cfg: EvaluateConfig) -> dict[str, Any] | None:
 
 
 def cohort_of(cfg: EvaluateConfig) -> list[ParticipantParams]:
-    return make_cohort(cfg.cohort, cfg.seed, (cfg.age_min, cfg.age_max), cfg.population or None)
+    return make_cohort(cfg.cohort, cfg.seed, (cfg.age_min, cfg.age_max), cfg.population or None, cfg.model)
 
 
 def tasks_for(people: list[ParticipantParams], policies: list[str], seed: int, variant: str = "main",
@@ -84,7 +92,8 @@ def run_evaluation(cfg: EvaluateConfig, people: list[ParticipantParams], out: Pa
     if traces:
         plots.append(plot_traces(traces, policies, out / TRACES_PLOT).name)
     (out / "summary.md").write_text(
-        summary_markdown(summary, comps, sens, command, len(people), cfg.seed, plots), encoding="utf-8")
+        summary_markdown(summary, comps, sens, command, len(people), cfg.seed, plots, cfg.model),
+        encoding="utf-8")
     return Evaluation(out, sessions, summary, comps, sens)
 
 
@@ -111,15 +120,19 @@ def _sensitivity(cfg: EvaluateConfig, people: list[ParticipantParams], policies:
 
 def headline(ev: Evaluation) -> str:
     """A few lines for the terminal."""
-    lines = [f"{'policy':<12} {'n':>4} {'median':>7} {'mean':>6} {'reach.':>7} {'>HRR70 s':>8} "
-             f"{'adapt/10':>8} {'cd HRR':>6} {'unreach':>7}"]
+    lines = [f"{'policy':<12} {'n':>4} {'median':>7} {'mean':>6} {'p10':>6} {'reach.':>7} {'>HRR70 s':>8} "
+             f"{'p90 s':>6} {'>=thr':>6} {'adapt/10':>8} {'cd HRR':>6} {'unreach':>7}  goals (issue 24)"]
     for _, r in ev.summary.iterrows():
         def pct(x: float) -> str:
             return "-" if not math.isfinite(x) else f"{100 * x:.1f}"
+        met = goals_met(r)
+        missed = [c for c, _, _ in GOALS if not met[c]]
         lines.append(f"{r['policy']:<12} {r['n']:>4} {pct(r['in_zone_median']):>7} "
-                     f"{pct(r['in_zone_mean']):>6} "
+                     f"{pct(r['in_zone_mean']):>6} {pct(r['in_zone_p10']):>6} "
                      f"{pct(r['in_zone_mean_reachable']):>7} {r['above_hrr70_s_median']:>8.0f} "
+                     f"{r['above_hrr70_s_p90']:>6.0f} {pct(r['at_least_threshold_share']):>6} "
                      f"{r['adaptations_per_10min_median']:>8.1f} {r['cooldown_end_frac_hrr_median']:>6.2f} "
-                     f"{pct(r['unreachable_share']):>7}")
+                     f"{pct(r['unreachable_share']):>7}  "
+                     + ("all met" if not missed else "missed: " + ", ".join(missed)))
     lines.append(f"written to {ev.out}: sessions.csv, summary.csv, summary.md, plots")
     return "\n".join(lines)

@@ -70,7 +70,8 @@ def session_metrics(run: SessionRun, reach: Reach | None = None) -> dict[str, An
     inside = (hr >= low) & (hr <= high)
     p = run.spec.params
     row: dict[str, Any] = {
-        "variant": run.spec.variant, "policy": run.spec.policy, "participant": run.spec.participant,
+        "model": p.model, "variant": run.spec.variant, "policy": run.spec.policy,
+        "participant": run.spec.participant,
         "age": round(p.age, 2), "female": p.female, "hr_rest_true": round(p.hr_rest, 2),
         "hr_max_true": round(p.hr_max_true, 2), "vo2max": round(p.vo2max, 2),
         "zone_low": round(low, 2), "zone_high": round(high, 2),

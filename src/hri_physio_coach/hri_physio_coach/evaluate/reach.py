@@ -1,16 +1,17 @@
 """Whether a person's zone is reachable with the controls a policy has (from the participant model).
 
-A setting (an activity at a ladder step) settles, in the model, at
-``HR_rest + u * (HRmax - HR_rest)`` with ``u`` its demand as a fraction of the person's reserve
-(fast and slow components together; the slow cardiac drift is left out, so a zone reached
-only by drifting up does not count). The zone is the one the coach set for this session.
+A setting (an activity at a ladder step) settles, in the participant's model, at
+``params.settled_hr(activity)`` (the standard model: ``HR_rest + u * (HRmax - HR_rest)`` with ``u``
+its demand as a fraction of the person's reserve, fast and slow components together; every model
+leaves the slow cardiac drift out, so a zone reached only by drifting up does not count). The zone
+is the one the coach set for this session.
 
 What a policy can hold through the conditioning decides which settings count:
 
 * ``static``: none to change: the routine's conditioning at the starting step;
 * ladder policies (``threshold``, ``fuzzy``): any step, with the routine's activities as they
   come; their demands are averaged over the conditioning (weighted by duration), since the
-  one-minute lag of the heart smooths the alternation;
+  one-minute lag of the heart smooths the alternation (their settled heart rates are averaged);
 * policies that pick activities (``predictive``): any activity with a stated cost, held, at
   any step.
 
@@ -25,7 +26,7 @@ from dataclasses import dataclass
 
 from hri_physio_coach.media_names import tempo_from_name
 from hri_physio_coach.participant.perception import KNOWN_ACTIVITIES
-from hri_physio_coach.participant.physiology import Activity, ParticipantParams, demand
+from hri_physio_coach.participant.physiology import Activity, ParticipantParams
 from hri_physio_coach.routine import Routine
 
 REACHABLE, BELOW, ABOVE, GAP = "reachable", "below", "above", "gap"
@@ -42,8 +43,6 @@ class Reach:
         return self.verdict == REACHABLE
 
 
-def settled_hr(p: ParticipantParams, u: float) -> float:
-    return p.hr_rest + min(max(u, 0.0), 1.0) * (p.hr_max_true - p.hr_rest)
 
 
 def reach(p: ParticipantParams, low: float, high: float, routine: Routine, phase: str,
@@ -54,16 +53,17 @@ def reach(p: ParticipantParams, low: float, high: float, routine: Routine, phase
     steps = range(len(speeds)) if adapts or chooses_activity else [start_index]
     slots = routine.phase(phase).activities
 
-    def u_of(gesture: str, k: int) -> float:  # what the participant does with an unknown gesture: rest
-        return demand(p, Activity(gesture if gesture in KNOWN_ACTIVITIES else "rest", tempos[k], speeds[k]))
+    def hr_of(gesture: str, k: int) -> float:  # what the participant does with an unknown gesture: rest
+        name = gesture if gesture in KNOWN_ACTIVITIES else "rest"
+        return p.settled_hr(Activity(name, tempos[k], speeds[k]))
 
     if chooses_activity:
         gestures = {str(a.attrs.get("gesture", a.name)) for a in routine.choices(phase)}
-        hrs = [settled_hr(p, u_of(g, k)) for g in sorted(gestures) for k in steps]
+        hrs = [hr_of(g, k) for g in sorted(gestures) for k in steps]
     else:
         total = sum(a.duration for a in slots)
-        hrs = [settled_hr(p, sum(a.duration * u_of(str(a.attrs.get("gesture", a.name)), k) for a in slots)
-                          / total) for k in steps]
+        hrs = [sum(a.duration * hr_of(str(a.attrs.get("gesture", a.name)), k) for a in slots) / total
+               for k in steps]
     lowest, highest = min(hrs), max(hrs)
     if any(low <= h <= high for h in hrs):
         verdict = REACHABLE

@@ -152,7 +152,7 @@ def simulate_session(spec: SessionSpec, base: CoachConfig | None = None) -> Sess
         now = min(t for t in wake if t is not None)
         for t_hr, bpm, true_bpm in sim.advance_hr(now):
             arrivals.append((delivered(t_hr), t_hr, bpm, true_bpm))
-            next_sample = t_hr + 1.0
+        next_sample = sim.next_report  # a strap dropout skips a second
         clock[0] = now
         while commands and commands[0][0] <= now + 1e-9:
             see(heapq.heappop(commands)[2])

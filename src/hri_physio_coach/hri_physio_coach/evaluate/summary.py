@@ -20,8 +20,18 @@ from scipy import stats
 
 SUMMARY_COLUMNS = (
     "policy", "n", "in_zone_median", "in_zone_mean", "in_zone_ci_low", "in_zone_ci_high",
-    "in_zone_mean_reachable", "above_hrr70_s_median", "adaptations_per_10min_median",
-    "cooldown_end_frac_hrr_median", "unreachable_share",
+    "in_zone_p10", "in_zone_mean_reachable", "above_hrr70_s_median", "above_hrr70_s_p90",
+    "adaptations_per_10min_median", "cooldown_end_frac_hrr_median", "unreachable_share",
+    "at_least_threshold_share",
+)
+#: The goals of issue 24 for the best new policy, on every participant model: (column, comparison, value).
+GOALS = (
+    ("in_zone_median", ">=", 0.98),
+    ("in_zone_p10", ">=", 0.85),
+    ("in_zone_mean_reachable", ">=", 0.97),
+    ("above_hrr70_s_p90", "<=", 30.0),
+    ("at_least_threshold_share", ">=", 0.95),
+    ("adaptations_per_10min_median", "<=", 3.0),
 )
 REFERENCES = ("threshold", "fuzzy")
 
@@ -41,19 +51,28 @@ def summarise(sessions: pd.DataFrame, seed: int, policies: Sequence[str] | None 
               resamples: int = 2000) -> pd.DataFrame:
     """One row per policy (in the order given), columns :data:`SUMMARY_COLUMNS`."""
     rows = []
+    reference = sessions[sessions["policy"] == "threshold"].set_index("participant")["in_zone"]
     for policy in policies or list(dict.fromkeys(sessions["policy"])):
         s = sessions[sessions["policy"] == policy]
+        mine = s.set_index("participant")["in_zone"]
+        both = mine.index.intersection(reference.index)
+        # At least as good as threshold, paired (a tenth of a point of slack for float rounding).
+        at_least = (float(np.mean(mine.loc[both].to_numpy() >= reference.loc[both].to_numpy() - 1e-3))
+                    if len(both) else math.nan)
         x = s["in_zone"].to_numpy(dtype=float)
         low, high = median_ci(x, seed, resamples)
         reachable = s[s["reachable"].astype(bool)]
         rows.append({
             "policy": policy, "n": len(s), "in_zone_median": float(np.nanmedian(x)),
             "in_zone_mean": float(np.nanmean(x)), "in_zone_ci_low": low, "in_zone_ci_high": high,
+            "in_zone_p10": float(np.nanpercentile(x, 10)) if np.isfinite(x).any() else math.nan,
             "in_zone_mean_reachable": float(reachable["in_zone"].mean()) if len(reachable) else math.nan,
             "above_hrr70_s_median": float(s["above_hrr70_s"].median()),
+            "above_hrr70_s_p90": float(s["above_hrr70_s"].quantile(0.9)),
             "adaptations_per_10min_median": float(s["adaptations_per_10min"].median()),
             "cooldown_end_frac_hrr_median": float(s["cooldown_end_frac_hrr"].median()),
             "unreachable_share": float(1.0 - s["reachable"].astype(bool).mean()),
+            "at_least_threshold_share": at_least,
         })
     return pd.DataFrame(rows, columns=list(SUMMARY_COLUMNS))
 
@@ -80,6 +99,52 @@ def comparisons(sessions: pd.DataFrame, references: Sequence[str] = REFERENCES) 
             for policy in present if policy != ref]
     return pd.DataFrame(rows, columns=["policy", "reference", "n", "median_diff", "mean_diff", "better",
                                        "worse", "p"])
+
+
+def goals_met(row: pd.Series) -> dict[str, bool]:
+    """Per goal of :data:`GOALS`, whether a summary row meets it (a missing figure does not)."""
+    out = {}
+    for column, op, value in GOALS:
+        x = float(row[column])
+        out[column] = math.isfinite(x) and (x >= value - 1e-9 if op == ">=" else x <= value + 1e-9)
+    return out
+
+
+def goals_table(summary: pd.DataFrame) -> pd.DataFrame:
+    """One row per policy: each goal's figure with 'ok' or 'MISSED'."""
+    rows = []
+    for _, r in summary.iterrows():
+        met = goals_met(r)
+        row: dict[str, Any] = {"policy": r["policy"]}
+        for column, op, value in GOALS:
+            row[f"{column} {op} {value:g}"] = f"{_cell(float(r[column]))} {'ok' if met[column] else 'MISSED'}"
+        row["all"] = "yes" if all(met.values()) else "no"
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def models_table(summaries: Sequence[tuple[str, pd.DataFrame]]) -> str:
+    """Markdown: one row per (participant model, policy) of ``hri_physio_evaluate`` summaries, with the
+    goals each row misses (for README and docs/EVALUATION.md: generated, not typed)."""
+    head = ("| model | policy | median | p10 | mean | mean, reachable | s above HRR70 (p90) | >= threshold "
+            "| adaptations / 10 min (median) | unreachable | goals missed |")
+    lines = [head, "|" + "---|" * 11]
+    for model, summary in summaries:
+        for _, r in summary.iterrows():
+            met = goals_met(r)
+            missed = [c for c, _, _ in GOALS if not met[c]]
+            if r["policy"] == "threshold":
+                missed = [c for c in missed if c != "at_least_threshold_share"]
+
+            def pct(x: float) -> str:
+                return "-" if not math.isfinite(x) else f"{100 * x:.1f} %"
+            lines.append(
+                f"| {model} | {r['policy']} | {pct(r['in_zone_median'])} | {pct(r['in_zone_p10'])} | "
+                f"{pct(r['in_zone_mean'])} | {pct(r['in_zone_mean_reachable'])} | "
+                f"{r['above_hrr70_s_p90']:.0f} | "
+                f"{pct(r['at_least_threshold_share'])} | {r['adaptations_per_10min_median']:.1f} | "
+                f"{pct(r['unreachable_share'])} | {', '.join(missed) if missed else 'none'} |")
+    return "\n".join(lines)
 
 
 def winner(summary: pd.DataFrame) -> str:
@@ -130,9 +195,10 @@ def markdown_table(df: pd.DataFrame, p_columns: Sequence[str] = ()) -> str:
 
 
 def summary_markdown(summary: pd.DataFrame, comps: pd.DataFrame, sens: pd.DataFrame | None,
-                     command: str, cohort: int, seed: int, plots: Sequence[str]) -> str:
+                     command: str, cohort: int, seed: int, plots: Sequence[str],
+                     model: str = "standard") -> str:
     parts = [
-        f"# Policy evaluation: {cohort} simulated people, seed {seed}",
+        f"# Policy evaluation: {cohort} simulated people, seed {seed}, participant model {model}",
         "",
         f"Command: `{command}`",
         "",
@@ -142,6 +208,11 @@ def summary_markdown(summary: pd.DataFrame, comps: pd.DataFrame, sens: pd.DataFr
         "model; `unreachable_share`: the others.",
         "",
         markdown_table(summary),
+        "",
+        "## Goals (issue 24; `at_least_threshold_share`: people with at least threshold's in-zone time, "
+        "paired)",
+        "",
+        markdown_table(goals_table(summary)),
         "",
         "## Paired differences (same people, policy minus reference; Wilcoxon signed-rank, two-sided)",
         "",

@@ -22,7 +22,6 @@ import numpy as np
 from hri_physio_coach.participant.physiology import (
     SAME_TIME,
     Activity,
-    HeartRateKinetics,
     ParticipantParams,
     breathing_rate,
     rr_sd,
@@ -92,7 +91,7 @@ class ParticipantSimulator:
             raise ValueError(f"ecg_rate must be > 0, got {ecg_rate}")
         self.p = params
         self.seed = seed
-        self.kinetics = HeartRateKinetics(params, dt)
+        self.kinetics = params.make_kinetics(dt)
         self.rng = np.random.default_rng(seed if stream == SESSION_STREAM else [seed, stream])
         self._ecg_rng = np.random.default_rng([seed, 0xEC6] if stream == SESSION_STREAM
                                               else [seed, 0xEC6, stream])
@@ -116,6 +115,9 @@ class ParticipantSimulator:
         self._pending_rr = 0.0  # a missed beat carries its interval into the next report
         self._recent_rr: deque[tuple[float, float]] = deque()
         self._pending: list[tuple[float, Activity]] = []  # (from when, activity), in the order they start
+        # The strap's jitter and dropouts draw from their own stream (a model without them draws nothing).
+        self._strap_rng = np.random.default_rng([seed, 0x57A9, stream])
+        self._dropout_left = 0  # seconds of an ongoing dropout still to go
 
     @property
     def t(self) -> float:
@@ -124,6 +126,11 @@ class ParticipantSimulator:
     @property
     def hr(self) -> float:
         return self.kinetics.hr
+
+    @property
+    def next_report(self) -> float:
+        """When the strap's next 1-Hz heart-rate report is due (it may be dropped)."""
+        return self.t0 + self._hr_second
 
     @property
     def first_beat(self) -> float:
@@ -230,7 +237,8 @@ class ParticipantSimulator:
                     intervals.append(self._interval)
             while t0 + self._hr_second <= now:
                 when = t0 + self._hr_second
-                reports.append((when, self._reported_hr(when, hr), hr))
+                if not self._dropped():
+                    reports.append((when, self._reported_hr(when, hr), hr))
                 self._hr_second += 1
 
     def _report_rr(self, when: float, rr: float, rr_t: list[float], rr_s: list[float]) -> None:
@@ -250,9 +258,26 @@ class ParticipantSimulator:
         while self._recent_rr and self._recent_rr[0][0] <= when - 5.0:
             self._recent_rr.popleft()
 
+    def _dropped(self) -> bool:
+        """The strap sends no heart rate this second (dropouts last 1-5 s; none without ``dropout_rate``)."""
+        rate = self.p.dropout_rate
+        if rate <= 0:
+            return False
+        if self._dropout_left > 0:
+            self._dropout_left -= 1
+            return True
+        # A dropout of mean length 3 s starts with probability rate / 3: about ``rate`` of seconds are lost.
+        if float(self._strap_rng.random()) < rate / 3.0:
+            self._dropout_left = int(self._strap_rng.integers(0, 5))
+            return True
+        return False
+
     def _reported_hr(self, when: float, model_hr: float) -> float:
         recent = [r for w, r in self._recent_rr if w > when - 3.0]
-        return 60.0 * len(recent) / math.fsum(recent) if recent else model_hr
+        bpm = 60.0 * len(recent) / math.fsum(recent) if recent else model_hr
+        if self.p.strap_jitter > 0:
+            bpm += self.p.strap_jitter * float(self._strap_rng.standard_normal())
+        return bpm
 
     def _ecg_until(self, t_end: float, intervals: list[tuple[float, float]]) -> tuple[np.ndarray, np.ndarray]:
         last = math.floor((t_end - self.t0) * self.ecg_rate + 1e-9)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass, replace
+from typing import ClassVar
 
 import numpy as np
 
@@ -51,6 +52,22 @@ class ParticipantParams:
     #: The person takes up a new instruction at the next multiple of this period (s) from the session
     #: start (0: at once), docs/PARTICIPANT_MODEL.md "Reaction to instructions".
     reaction_period: float = 5.0
+    #: The strap's 1-Hz heart rate: Gaussian jitter (SD, bpm) and the share of seconds with no report
+    #: (0: none; the standard model has neither and draws no number for them).
+    strap_jitter: float = 0.0
+    dropout_rate: float = 0.0
+
+    #: The participant model these parameters belong to (``hri_physio_evaluate --model``).
+    model: ClassVar[str] = "standard"
+
+    def make_kinetics(self, dt: float) -> HeartRateKinetics:
+        """The heart-rate model of these parameters, stepped every ``dt`` s."""
+        return HeartRateKinetics(self, dt)
+
+    def settled_hr(self, activity: Activity) -> float:
+        """Where heart rate settles (bpm) doing ``activity`` for long, cardiac drift left out."""
+        u = demand(self, activity)
+        return self.hr_rest + min(max(u, 0.0), 1.0) * (self.hr_max_true - self.hr_rest)
 
     def validate(self) -> None:
         problems = []
@@ -69,6 +86,8 @@ class ParticipantParams:
             problems.append(f"reaction_period must be >= 0 s, got {self.reaction_period}")
         if not 0 <= self.tempo_compliance <= 1:
             problems.append(f"tempo_compliance must be in [0, 1], got {self.tempo_compliance}")
+        if self.strap_jitter < 0 or not 0 <= self.dropout_rate < 1:
+            problems.append("need strap_jitter >= 0 bpm and dropout_rate in [0, 1)")
         if problems:
             raise ValueError("invalid participant: " + "; ".join(problems))
 

@@ -25,6 +25,8 @@ CHANGE_ACTIVITY = "change_activity"  # a policy that picks activities chose anot
 #: A proposal's ``level`` that hands the choice of activity back to the routine (no cost is below 1 MET).
 FOLLOW_ROUTINE = 0.0
 OUT_OF_REACH = "out_of_reach"  # the zone cannot be reached with the controls at hand (said once)
+#: A decision's notice: no single setting lands in the zone, two alternate (the coach emits ``zone_gap``).
+ZONE_GAP = "zone_gap"
 
 # Phase kinds the options refer to.
 WARM_UP = "warm_up"

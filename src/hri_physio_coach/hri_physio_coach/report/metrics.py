@@ -187,8 +187,12 @@ def _adaptations(timeline: Timeline) -> dict[str, Any]:
         row["adaptations"] += int(u.delta != 0)
         row[u.outcome] += 1
     actions = Counter(u.action for u in timeline.rule_updates)
+    # What the coach said about the zone itself: out of reach, or a gap bridged by alternating two settings.
+    notices = [{"t": e.get("t"), "event": e.get("event"), "reason": e.get("reason")} for e in timeline.events
+               if e.get("event") in ("zone_out_of_reach", "zone_gap")]
     return {"total": sum(int(u.delta != 0) for u in timeline.rule_updates),
-            "rule_updates": len(timeline.rule_updates), "per_phase": per_phase, "actions": dict(actions)}
+            "rule_updates": len(timeline.rule_updates), "per_phase": per_phase, "actions": dict(actions),
+            "zone_notices": notices}
 
 
 def _behaviours(timeline: Timeline) -> dict[str, Any]:

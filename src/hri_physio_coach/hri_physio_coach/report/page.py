@@ -106,6 +106,10 @@ def render(report: dict[str, Any], figures: dict[str, Path], configs: dict[str, 
         keys = list(next(iter(per.values())).keys())
         parts.append("<h2>Rule updates and adaptations per phase</h2>")
         parts.append(_table(["Phase", *keys], [[ph, *[row.get(k) for k in keys]] for ph, row in per.items()]))
+    notices = report["adaptations"].get("zone_notices") or []
+    if notices:
+        parts.append(_table(["Zone notice at (s)", "Event", "Why"],
+                            [[n.get("t"), n.get("event"), n.get("reason")] for n in notices]))
     parts.append("<h2>Behaviours</h2>")
     parts.append(_table(["Kind", "Count"], sorted(report["behaviours"]["by_kind"].items())))
 
