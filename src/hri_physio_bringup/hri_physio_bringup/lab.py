@@ -26,7 +26,8 @@ Discovery is opened only as far as the lab file says, and only for a command giv
 without it nothing changes (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, LSL ``ResolveScope =
 machine``). With ``discovery: peers`` ROS 2 keeps its multicast discovery on the host and reaches
 the other hosts of the lab by unicast (``ROS_STATIC_PEERS``); LSL keeps its multicast on the host
-and asks the lab's other hosts directly (``KnownPeers`` in a generated ``lsl_api.cfg``). With
+and asks the lab's other hosts directly (``KnownPeers`` in a generated ``lsl_api.cfg``, with a
+``SessionID`` of the lab's own so that LSL tools elsewhere on the network do not list its streams). With
 ``discovery: subnet`` both also use multicast on the local subnet (ROS ``SUBNET``, LSL ``link``).
 """
 
@@ -189,7 +190,10 @@ def lsl_config(lab: Lab, role: str) -> str:
         f"{'; multicast reaches the local link' if scope == 'link' else ', no further'}.\n"
         "[multicast]\n"
         f"ResolveScope = {scope}\n"
-        "\n[lab]\n"
+        "\n; Only streams of this session id are resolved: an LSL tool elsewhere on the network (the\n"
+        "; default id) does not list the lab's strap. liblsl has no access control: a firewall does that.\n"
+        "[lab]\n"
+        f"SessionID = {session_id(lab)}\n"
         f"KnownPeers = {{{peers}}}\n"
         "\n; Outlets take 2 ports each from BasePort on; a resolver asks each known peer on every port\n"
         "; of the range, so the lab's range is kept to what a strap host needs (64 outlets).\n"
@@ -198,6 +202,11 @@ def lsl_config(lab: Lab, role: str) -> str:
         f"PortRange = {LSL_PORT_RANGE}\n"
         "\n[log]\nlevel = -1\n"
     )
+
+
+def session_id(lab: Lab) -> str:
+    """The LSL session id of the lab's streams (liblsl resolves only streams of its own session id)."""
+    return f"hri-physio-{lab.lab}"
 
 
 def dds_ports(domain: int) -> tuple[int, int]:

@@ -8,7 +8,11 @@ computers do not, and a lab's traffic must cross the lab's links.
 
 1. A shortened session across the three hosts: every strap sample reaches the station's bag
    (counter check of HR and ECG), the coach's commands reach the robot host and are answered from
-   there, the report is written, and the two other hosts end when the station's session ends.
+   there, the report is written, and the two other hosts end when the station's session ends. A
+   fourth namespace on the same bridge, not in the lab file, with ordinary (subnet-wide) discovery,
+   sees none of the lab's topics or streams. The same with two hosts (robot and station sharing
+   one) and ``discovery: subnet``, where that outsider does see the ROS topics (not the strap's
+   LSL streams: the lab's LSL session id is its own).
 2. The robot host's link is taken down for 10 s mid-session: the coach carries on, the robot side
    is heard again and performs commands after it, and the outage is in the bag, the report and
    summary.json.
@@ -19,6 +23,8 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import subprocess
+import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -39,7 +45,10 @@ REASON = unavailable_reason()
 pytestmark = [pytest.mark.ros, pytest.mark.lsl,
               pytest.mark.skipif(REASON is not None, reason=f"no network-namespace lab here: {REASON}")]
 
-HOSTS = ["sensor", "robot", "station"]
+#: Topologies: which host runs each role, and the lab's discovery.
+THREE_HOSTS = ({"sensor": "sensor", "robot": "robot", "station": "station"}, "peers")
+TWO_HOSTS_SUBNET = ({"sensor": "laptop", "robot": "pc", "station": "pc"}, "subnet")
+OUTSIDER = "outsider"  # on the lab's bridge, not in the lab file
 STARTUP = 400.0  # wall seconds: three launchers and a dozen nodes on a busy 2-core machine
 SESSION = 600.0
 OUTAGE = 10.0
@@ -64,11 +73,39 @@ def lab_domain() -> Iterator[int]:
     raise AssertionError("no free ROS domain for the lab test")
 
 
-def write_lab(path: Path, net: NetnsLab, domain: int, device: str) -> Path:
+def write_lab(path: Path, net: NetnsLab, domain: int, device: str, roles: dict[str, str],
+              discovery: str) -> Path:
     path.write_text(yaml.safe_dump({
-        "lab": f"nslab-{net.tag}", "ros_domain": domain, "device_id": device,
-        "hosts": {host: net.address(host) for host in HOSTS}, "roles": {host: host for host in HOSTS}}))
+        "lab": f"nslab-{net.tag}", "ros_domain": domain, "device_id": device, "discovery": discovery,
+        "hosts": {host: net.address(host) for host in set(roles.values())}, "roles": roles}))
     return path
+
+
+#: What an outsider on the lab's network finds: ROS topics (ordinary subnet-wide discovery in the lab's
+#: domain) and LSL streams (link scope), as JSON.
+PROBE = """
+import json, sys, time
+import pylsl, rclpy
+rclpy.init()
+node = rclpy.create_node("outsider")
+seen, end = set(), time.monotonic() + float(sys.argv[1])
+while time.monotonic() < end:
+    rclpy.spin_once(node, timeout_sec=0.2)
+    seen |= {name for name, _types in node.get_topic_names_and_types()}
+streams = sorted(info.name() for info in pylsl.resolve_streams(5.0))
+print(json.dumps({"topics": sorted(seen), "streams": streams}))
+"""
+
+
+def probe_as_outsider(tmp_path: Path, net: NetnsLab, domain: int, seconds: float) -> dict[str, list[str]]:
+    cfg = tmp_path / "outsider_lsl_api.cfg"
+    cfg.write_text("[multicast]\nResolveScope = link\n[ports]\nPortRange = 128\n[log]\nlevel = -1\n")
+    env = session_env(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET", ROS_STATIC_PEERS="",
+                      FASTDDS_BUILTIN_TRANSPORTS="UDPv4", LSLAPICFG=str(cfg))
+    done = subprocess.run(net.command(OUTSIDER, [sys.executable, "-c", PROBE, str(seconds)]), env=env,
+                          capture_output=True, text=True, timeout=seconds + 120)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout.strip().splitlines()[-1])
 
 
 def string_messages(bag: Path, wanted: set[str]) -> list[tuple[str, int, str]]:
@@ -92,15 +129,16 @@ def role_folder(out: Path, role: str) -> Path:
 class Lab:
     """The three launchers in their namespaces, their outputs, their folders."""
 
-    def __init__(self, tmp_path: Path, net: NetnsLab, lab_file: Path, options: list[str]) -> None:
-        self.tmp_path, self.net = tmp_path, net
+    def __init__(self, tmp_path: Path, net: NetnsLab, lab_file: Path, options: list[str],
+                 roles: dict[str, str], domain: int) -> None:
+        self.tmp_path, self.net, self.domain = tmp_path, net, domain
         env = session_env(FASTDDS_BUILTIN_TRANSPORTS="UDPv4")
         self.procs: dict[str, NodeProcess] = {}
         for role in ("robot", "sensor", "station"):
             self.procs[role] = NodeProcess(
                 "hri_physio_session", "--lab", str(lab_file), "--role", role, *options,
                 "--out", str(tmp_path / f"out-{role}"), env=env,
-                prefix=tuple(net.command(role, [])))
+                prefix=tuple(net.command(roles[role], [])))
 
     def output(self, role: str) -> str:
         return self.procs[role].output
@@ -118,8 +156,14 @@ class Lab:
 
 
 @pytest.fixture
-def net() -> Iterator[NetnsLab]:
-    lab = NetnsLab(HOSTS)
+def topology(request: pytest.FixtureRequest) -> tuple[dict[str, str], str]:
+    return getattr(request, "param", THREE_HOSTS)
+
+
+@pytest.fixture
+def net(topology: tuple[dict[str, str], str]) -> Iterator[NetnsLab]:
+    roles, _discovery = topology
+    lab = NetnsLab([*dict.fromkeys(roles.values()), OUTSIDER])
     try:
         lab.create()
         yield lab
@@ -129,13 +173,14 @@ def net() -> Iterator[NetnsLab]:
         assert not errors and not left, (errors, left)
 
 
-def run_lab(tmp_path: Path, net: NetnsLab, session_tag: str, options: list[str],
-            during: Any = None) -> tuple[Lab, dict[str, int]]:
-    """Start the three hosts, run ``during(lab)`` once the session runs, wait for every host's end."""
+def run_lab(tmp_path: Path, net: NetnsLab, session_tag: str, options: list[str], during: Any = None,
+            topology: tuple[dict[str, str], str] = THREE_HOSTS) -> tuple[Lab, dict[str, int]]:
+    """Start the three roles, run ``during(lab)`` once the session runs, wait for every role's end."""
+    roles, discovery = topology
     with lab_domain() as domain:
-        lab_file = write_lab(tmp_path / "lab.yaml", net, domain, f"SIM{session_tag}")
+        lab_file = write_lab(tmp_path / "lab.yaml", net, domain, f"SIM{session_tag}", roles, discovery)
         routine = short_routine(tmp_path, FOUR_AND_A_HALF_MINUTES)
-        lab = Lab(tmp_path, net, lab_file, [*routine, "--speed", "10", *options])
+        lab = Lab(tmp_path, net, lab_file, [*routine, "--speed", "10", *options], roles, domain)
         try:
             station = lab.procs["station"]
             wait_until(lambda: "[session] system ready" in station.output or station.proc.poll() is not None,
@@ -162,19 +207,35 @@ def check_every_strap_sample_in_the_bag(bag: Path) -> dict[str, list]:
     return messages
 
 
-def test_a_session_across_three_hosts_gets_every_strap_sample_and_drives_the_robot_host(
-        tmp_path: Path, net: NetnsLab, session_tag: str) -> None:
+@pytest.mark.parametrize("topology", [THREE_HOSTS, TWO_HOSTS_SUBNET], indirect=True,
+                         ids=["three-hosts", "two-hosts-subnet"])
+def test_a_session_across_the_lab_gets_every_strap_sample_and_drives_the_robot_host(
+        tmp_path: Path, net: NetnsLab, session_tag: str, topology: tuple[dict[str, str], str]) -> None:
+    roles, discovery = topology
+    address = {role: net.address(host) for role, host in roles.items()}
+    outsider: dict[str, list[str]] = {}
+
+    def look_from_outside(lab: Lab) -> None:
+        outsider.update(probe_as_outsider(tmp_path, net, lab.domain, 10.0))
+
     started = time.monotonic()
-    lab, codes = run_lab(tmp_path, net, session_tag, [])
-    print(f"lab session across namespaces: {time.monotonic() - started:.0f} s of wall time")
+    lab, codes = run_lab(tmp_path, net, session_tag, [], look_from_outside, topology)
+    print(f"lab session across namespaces ({discovery}): {time.monotonic() - started:.0f} s of wall time")
     assert codes == {"station": 0, "robot": 0, "sensor": 0}, lab.all_output()
     station_out = lab.output("station")
     for role in ("sensor", "robot"):
-        assert f"[lab] {role} host {role} ({net.address(role)}) is up:" in station_out, station_out
+        assert f"[lab] {role} host {roles[role]} ({address[role]}) is up:" in station_out, station_out
         assert "[lab] the station's session has ended" in lab.output(role), lab.output(role)
         summary = json.loads((lab.folder(role) / "summary.json").read_text())
-        assert summary["outcome"] == "finished" and summary["address"] == net.address(role)
+        assert summary["outcome"] == "finished" and summary["address"] == address[role]
     assert "unreachable" not in station_out, station_out
+    lab_topics = {topics.COACH_STATE, topics.QT_COMMANDS, topics.POLAR_H10_HR}
+    if discovery == "peers":  # not in the lab file: ordinary discovery finds nothing of it
+        assert not lab_topics & set(outsider["topics"]), outsider
+    else:  # subnet discovery: multicast on the subnet, so a host on it does see the lab's ROS topics
+        assert lab_topics <= set(outsider["topics"]), outsider
+    # An LSL tool on the network (the default session id) does not list the lab's strap.
+    assert not [s for s in outsider["streams"] if "PolarH10" in s], outsider
 
     folder = session_folder(station_out)
     summary = json.loads((folder / "summary.json").read_text())
@@ -182,12 +243,14 @@ def test_a_session_across_three_hosts_gets_every_strap_sample_and_drives_the_rob
     assert set(summary["nodes"]) == {"physio_recorder", "hr_receiver", "ecg_receiver", "neurokit_processor",
                                      "qt_physio_coach"}  # the station's share only
     ros = summary["lab"]["ros"]
-    assert ros["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
-    assert sorted(ros["ROS_STATIC_PEERS"].split(";")) == sorted([net.address("robot"), net.address("sensor")])
+    assert ros["ROS_AUTOMATIC_DISCOVERY_RANGE"] == ("LOCALHOST" if discovery == "peers" else "SUBNET")
+    others = {address["robot"], address["sensor"]} - {address["station"]}
+    assert sorted(ros["ROS_STATIC_PEERS"].split(";")) == sorted(others)
     assert summary["lab"]["outages"] == []
     assert set(summary["lab"]["clock_offsets"]["wall_offset_upper_bound_s"]) == {"sensor", "robot"}
     cfg = (folder / "lsl_api.cfg").read_text()
-    assert "ResolveScope = machine" in cfg and net.address("sensor") in cfg
+    assert f"ResolveScope = {'machine' if discovery == 'peers' else 'link'}" in cfg
+    assert address["sensor"] in cfg
 
     check_every_strap_sample_in_the_bag(folder / "bag")
     wanted = {topics.QT_COMMANDS, topics.QT_REPLIES, topics.QT_MOCK_EVENTS, topics.AUDIO_STATUS}

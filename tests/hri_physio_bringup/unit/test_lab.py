@@ -93,6 +93,7 @@ def test_each_role_gets_an_lsl_config_resolving_on_its_host_and_asking_the_lab_h
     assert cfg["multicast"]["ResolveScope"] == "machine"
     assert sorted(known_peers(cfg)) == sorted(set(THREE["hosts"].values()) - {lab.address_of(role)})
     assert int(cfg["ports"]["BasePort"]) == 16572 and int(cfg["ports"]["PortRange"]) >= 16
+    assert cfg["lab"]["SessionID"] == "hri-physio-thesis"  # the same on every host of the lab
 
 
 def test_subnet_discovery_is_opt_in_and_widens_both_ros_and_lsl() -> None:
