@@ -323,7 +323,10 @@ def build_parser() -> argparse.ArgumentParser:
         "hri_physio_session --routine my_routine.yaml --out /data/study1\n\n"
         "Isolation: the session claims a ROS domain of its own (a free one, printed at the start; or "
         "ROS_DOMAIN_ID if you export it, refused while another session holds it) and LSL stream names "
-        "of its own (--device-id).",
+        "of its own (--device-id).\n\n"
+        "A lab of several computers: give each host the same lab file and its role, e.g. "
+        "hri_physio_session --lab lab.yaml --role sensor|robot|station (config/lab.example.yaml; "
+        "docs/ARCHITECTURE.md, \"Running a lab\").",
     )
     add_config_arguments(p, SessionConfig)
     for group in p._action_groups:  # the launcher's options are not ROS parameters

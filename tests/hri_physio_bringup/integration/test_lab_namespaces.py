@@ -314,3 +314,15 @@ def test_the_robot_host_unplugged_for_10_s_the_coach_carries_on_and_the_outage_i
     report = json.loads((folder / "report.json").read_text())
     shown = [e["event"] for e in report["session_events"]]
     assert "host_unreachable" in shown and "host_back" in shown, report["session_events"]
+
+
+def test_the_namespace_lab_is_removed_after_a_failure_and_after_a_half_made_lab() -> None:
+    net = NetnsLab(["a", "b"])
+    with pytest.raises(RuntimeError, match="a test failing inside the lab"), net:
+        assert len(existing_namespaces(net.tag)) == 3  # the switch and the two hosts
+        raise RuntimeError("a test failing inside the lab")
+    assert existing_namespaces(net.tag) == []
+    half = NetnsLab(["a", "no/such"])  # the second host's namespace cannot be made
+    with pytest.raises(subprocess.CalledProcessError), half:
+        pass
+    assert half.made == [] and existing_namespaces(half.tag) == []
