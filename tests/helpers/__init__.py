@@ -104,11 +104,12 @@ class NodeProcess:
     """A console-script node in a subprocess, output captured to a file."""
 
     def __init__(self, script: str, *args: str, stdin: int | None = subprocess.DEVNULL,
-                 env: dict[str, str] | None = None) -> None:
+                 env: dict[str, str] | None = None, prefix: tuple[str, ...] = ()) -> None:
+        """``prefix``: a command the script runs under (e.g. ``ip netns exec <namespace>``)."""
         self.log_file = tempfile.NamedTemporaryFile("w+", suffix=f"-{script}.log", delete=False)  # noqa: SIM115
         exe = str(Path(sys.prefix) / "bin" / script)
         self.proc = subprocess.Popen(
-            [exe, *args], stdout=self.log_file, stderr=subprocess.STDOUT, stdin=stdin,
+            [*prefix, exe, *args], stdout=self.log_file, stderr=subprocess.STDOUT, stdin=stdin,
             env=dict(os.environ) if env is None else env, text=True,
         )
         self._final_output: str | None = None

@@ -54,3 +54,6 @@ PARTICIPANT_STATE = "/participant/state"
 # --- the session launcher ---------------------------------------------------------------------------
 #: Supervision events (JSON): a node restarted, a receiver's gap, a node whose loss ended the session.
 SESSION_EVENTS = "/session/events"
+#: A lab of several hosts: each host launcher's heartbeat (JSON), and the station's session end (latched).
+LAB_HOSTS = "/lab/hosts"
+LAB_SESSION = "/lab/session"

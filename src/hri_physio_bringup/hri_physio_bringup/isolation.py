@@ -155,3 +155,38 @@ def new_device_id(rng: random.Random | None = None) -> str:
 def holder_info(folder: Path, started: str, role: str = "session") -> dict[str, Any]:
     """What a claim writes into its lock file for others to read (this process is the holder)."""
     return {"pid": os.getpid(), "started": started, "folder": str(folder), "role": role}
+
+
+LAB_ROLE_LOCK = "hri_physio_domain_{}_{}.lock"
+
+
+def claim_lab_domain(domain: int, role: str, info: dict[str, Any],
+                     lock_dir: Path | None = None) -> DomainClaim:
+    """Claim ``domain`` for one role of a lab (raises :class:`DomainInUse` naming the holder).
+
+    The roles of one lab share their domain, also when two of them run on one machine: each holds
+    the domain's lock shared (so a single-host session cannot pick it meanwhile) and its role's
+    lock exclusively (so a role does not run twice on one machine).
+    """
+    directory = Path(lock_dir) if lock_dir is not None else Path(tempfile.gettempdir())
+    role_handle, holder = _try_lock(directory / LAB_ROLE_LOCK.format(domain, role))
+    if role_handle is None:
+        assert holder is not None
+        raise DomainInUse(f"the lab's {role} role (ROS domain {domain}) already runs on this machine: "
+                          f"{holder.describe()}")
+    _write_holder(role_handle, info)
+    try:
+        shared = open(directory / DOMAIN_LOCK.format(domain), "a+", encoding="utf-8")  # noqa: SIM115
+    except OSError as exc:
+        role_handle.close()
+        raise DomainInUse(f"ROS domain {domain}: cannot open its lock file ({exc.strerror})") from None
+    try:
+        fcntl.flock(shared, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except OSError:
+        holder = Holder.read(shared)
+        shared.close()
+        role_handle.close()
+        raise DomainInUse(f"ROS domain {domain} (the lab file's ros_domain) is in use by "
+                          f"{holder.describe()}; stop it or give the lab another domain") from None
+    _write_holder(shared, info)  # what a session refused the domain says (the last role to start)
+    return DomainClaim(domain, chosen=False, handles=[role_handle, shared])

@@ -65,6 +65,13 @@ class SessionConfig(NodeConfig):
     audio_sink: Literal["null", "device", "auto"] = option(
         "null", "the audio streamer's output: null (no sound, the music still plays on the session's "
         "clock), device (the sound card, or a start-up error), auto (the sound card when one exists)")
+    lab: str = option("", "lab file (YAML) naming the lab's hosts and their roles, for a session "
+                      "across computers ('' = everything on this host, discovery kept to it; see "
+                      "docs/ARCHITECTURE.md, running a lab)")
+    role: Literal["", "sensor", "robot", "station"] = option(
+        "", "this host's part of a lab session (with --lab): sensor (the strap side, on LSL), robot "
+        "(qt_controller, the mock robot, the media streamers) or station (receivers, processor, coach, "
+        "recorder and the session's clock)")
 
     @model_validator(mode="before")
     @classmethod
@@ -100,6 +107,11 @@ class SessionConfig(NodeConfig):
         if self.device_id and not self.device_id.replace("-", "").replace("_", "").isalnum():
             raise ValueError(f"device_id may hold letters, digits, '-' and '_' only, got {self.device_id!r}")
         self._check_source()
+        if bool(self.lab) != bool(self.role):
+            raise ValueError("a lab session needs both --lab <lab file> and --role sensor|robot|station"
+                             if self.role else "--lab needs --role sensor|robot|station (this host's part)")
+        if self.lab and not Path(self.lab).is_file():
+            raise ValueError(f"lab: {self.lab} does not exist")
         return self
 
     def _check_source(self) -> None:

@@ -17,7 +17,7 @@ from ``polar_streamer`` and a real Polar H10 (``polar-replay:<capture>`` replays
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -51,6 +51,10 @@ RECORDER, MOCK, CONTROLLER = "physio_recorder", "mock_qt_robot", "qt_controller"
 HR_RECEIVER, ECG_RECEIVER, PROCESSOR = "hr_receiver", "ecg_receiver", "neurokit_processor"
 PARTICIPANT, COACH = PARTICIPANT_NODE, COACH_NODE
 AUDIO, VIDEO, POLAR_STREAMER = "audio_streamer", "video_streamer", "polar_streamer"
+#: Which part of a lab (``--role``) runs each node.
+ROLE_OF = {RECORDER: "station", MOCK: "robot", CONTROLLER: "robot", AUDIO: "robot", VIDEO: "robot",
+           PARTICIPANT: "sensor", POLAR_STREAMER: "sensor", HR_RECEIVER: "station", ECG_RECEIVER: "station",
+           PROCESSOR: "station", COACH: "station"}
 #: Frames the audio streamer renders at once on the null sink: at 30x sim time, ~320 blocks per wall second.
 NULL_SINK_BLOCK = 4096
 
@@ -252,3 +256,15 @@ def plan_session(options: SessionConfig, folder: SessionFolder, device_id: str,
             recorded += [topics.POLAR_H10_ECG_HR, f"{topics.POLAR_H10_ECG}/status"]
         listeners += [(topic, capture) for topic in recorded]
     return SessionPlan(coach, duration, device_id, tuple(nodes), tuple(listeners))
+
+
+def listener_role(node: str) -> str | None:
+    """The role whose node listens in a plan's (topic, node) pair (the recorder's capture: the station)."""
+    return ROLE_OF.get(node.removesuffix("_capture"))
+
+
+def for_role(plan: SessionPlan, role: str) -> SessionPlan:
+    """The nodes one host of a lab runs (``role``), in start order; the listeners stay: the station
+    waits for every host's nodes to listen before it starts the session."""
+    nodes = tuple(n for n in plan.nodes if ROLE_OF[n.name] == role)
+    return replace(plan, nodes=nodes)

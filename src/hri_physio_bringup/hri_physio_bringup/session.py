@@ -62,20 +62,24 @@ from hri_physio_bringup.console import (
     VerboseConsole,
 )
 from hri_physio_bringup.folder import SessionFolder
+from hri_physio_bringup.hosts import SESSION_ENDED, HostWatch, parse_heartbeat
 from hri_physio_bringup.isolation import (
     DomainClaim,
     DomainInUse,
     claim_domain,
+    claim_lab_domain,
     holder_info,
     new_device_id,
     parse_domain,
 )
+from hri_physio_bringup.lab import Lab, LabError, describe, load_lab, lsl_config, ros_environment
 from hri_physio_bringup.options import PROG, SessionConfig
 from hri_physio_bringup.plan import (
     COACH,
     POLAR_STREAMER,
     SessionPlan,
     coach_config,
+    for_role,
     plan_session,
 )
 from hri_physio_bringup.supervision import Loss, Restart, Supervisor, gap_line, restarts_text, status_text
@@ -99,7 +103,8 @@ class ClockAndWatcher(BackgroundNode):
 
     def __init__(self, view: SessionView, hr_topic: str, receivers: dict[str, str],
                  listeners: tuple[tuple[str, str], ...], guard: ClockGuard | None = None,
-                 strap_node: str | None = None, supervisor: Supervisor | None = None) -> None:
+                 strap_node: str | None = None, supervisor: Supervisor | None = None,
+                 hosts: HostWatch | None = None) -> None:
         from rosgraph_msgs.msg import Clock
         from std_msgs.msg import Float64MultiArray, String
 
@@ -119,6 +124,13 @@ class ClockAndWatcher(BackgroundNode):
         self.events_pub = self.node.create_publisher(String, topics.SESSION_EVENTS, event_qos())
         #: Restarts of receivers whose gap their first new frame closed (for the main thread to publish).
         self.closed_gaps: list[Restart] = []
+        self.hosts = hosts
+        #: A lab's hosts heard or lost: (console line, event to publish) for the main thread to say.
+        self.host_news: list[tuple[str, dict[str, Any] | None]] = []
+        #: Per host role: the smallest (station wall clock - host wall clock) over its heartbeats, in s.
+        self.wall_offsets: dict[str, float] = {}
+        if hosts is not None:
+            self._watch_hosts(hosts)
         strap = hr_topic == topics.POLAR_H10_HR
 
         def strap_samples(frame: Any) -> None:
@@ -208,6 +220,48 @@ class ClockAndWatcher(BackgroundNode):
             supervisor.track(node)
             self.node.create_subscription(Float64MultiArray, topic, output(node), frame_qos())
 
+    def _watch_hosts(self, hosts: HostWatch) -> None:
+        """The lab's other hosts: their heartbeats, and the latched end of the session for them."""
+        from std_msgs.msg import String
+
+        from hri_physio_bridge.qos import latched_qos
+        from hri_physio_bringup.lab_host import heartbeat_qos
+
+        self.lab_session_pub = self.node.create_publisher(String, topics.LAB_SESSION, latched_qos())
+
+        def on_heartbeat(msg: String) -> None:
+            data = parse_heartbeat(msg.data, hosts.lab)
+            if data is None:
+                return
+            received = time.time()
+            with self.lock:
+                t = self.sim_now if math.isfinite(self.sim_now) else 0.0
+                self.host_news += hosts.heard(data, time.monotonic(), t)
+                if isinstance(data.get("wall"), int | float):
+                    offset = received - float(data["wall"])
+                    role = str(data["role"])
+                    self.wall_offsets[role] = min(self.wall_offsets.get(role, math.inf), offset)
+
+        self.node.create_subscription(String, topics.LAB_HOSTS, on_heartbeat, heartbeat_qos())
+
+    def lab_step(self, say: Callable[[str], None]) -> None:
+        """Say (and publish on /session/events) what the lab's hosts did since the last call."""
+        if self.hosts is None:
+            return
+        with self.lock:
+            t = self.sim_now if math.isfinite(self.sim_now) else 0.0
+            news, self.host_news = self.host_news + self.hosts.check(time.monotonic(), t), []
+        for line, event in news:
+            say(line)
+            if event is not None:
+                self.publish_event(event)
+
+    def end_lab_session(self, t: float) -> None:
+        """Tell the lab's other hosts that the session has ended (latched: a host reconnecting hears it)."""
+        if self.hosts is not None:
+            self.lab_session_pub.publish(self._string_cls(data=json.dumps(
+                {"event": SESSION_ENDED, "lab": self.hosts.lab.lab, "t": t if math.isfinite(t) else None})))
+
     def publish_event(self, event: dict[str, Any]) -> None:
         """One event on /session/events (JSON)."""
         self.events_pub.publish(self._string_cls(data=json.dumps(event)))
@@ -273,7 +327,10 @@ def build_parser() -> argparse.ArgumentParser:
         "hri_physio_session --routine my_routine.yaml --out /data/study1\n\n"
         "Isolation: the session claims a ROS domain of its own (a free one, printed at the start; or "
         "ROS_DOMAIN_ID if you export it, refused while another session holds it) and LSL stream names "
-        "of its own (--device-id).",
+        "of its own (--device-id).\n\n"
+        "A lab of several computers: give each host the same lab file and its role, e.g. "
+        "hri_physio_session --lab lab.yaml --role sensor|robot|station (config/lab.example.yaml; "
+        "docs/ARCHITECTURE.md, \"Running a lab\").",
     )
     add_config_arguments(p, SessionConfig)
     for group in p._action_groups:  # the launcher's options are not ROS parameters
@@ -304,6 +361,37 @@ class Outcome:
             self.problem, self.code = problem, code
 
 
+@dataclass
+class LabRun:
+    """This host's part of a lab session: the lab, its role, what it opened; the station's view at the end."""
+
+    lab: Lab
+    role: str
+    env: dict[str, str]  # the ROS discovery variables set for this host's processes
+    lsl_config: str  # the generated lsl_api.cfg (LSLAPICFG)
+    hosts: HostWatch | None = None
+    outages: list[dict[str, Any]] = field(default_factory=list)
+    wall_offsets: dict[str, float] = field(default_factory=dict)
+
+    def summary(self) -> dict[str, Any]:
+        lab = self.lab
+        return {
+            "lab": lab.lab, "role": self.role, "host": lab.host_of(self.role),
+            "address": lab.address_of(self.role), "discovery": lab.discovery, "ros": self.env,
+            "lsl_config": self.lsl_config, "hosts": None if self.hosts is None else self.hosts.report(),
+            "outages": self.outages,
+            "clock_offsets": {
+                "ros": "every ROS node of the lab runs on this station's /clock (use_sim_time): the "
+                       "session's time is the same on every host whatever their wall clocks say",
+                "lsl": "a simulated strap stamps its samples on that clock too; a real strap stamps them on "
+                       "the sensor host's LSL clock",
+                # Receive time here minus send time there, smallest over the heartbeats: the wall-clock
+                # offset plus the one-way delay, so an upper bound of the offset.
+                "wall_offset_upper_bound_s": {role: round(v, 4) for role, v in self.wall_offsets.items()},
+            },
+        }
+
+
 def make_console(options: SessionConfig, title: str) -> SessionConsole:
     if options.verbose:
         return VerboseConsole(sys.stdout, options.progress_every)
@@ -331,13 +419,14 @@ def drive(done: Callable[[], bool], clock: SimClock, stop: threading.Event) -> b
 
 
 def wait_for_system(watcher: ClockAndWatcher, group: ProcessGroup, clock: SimClock, view: SessionView,
-                    stop: threading.Event, timeout: float) -> str | None:
+                    stop: threading.Event, timeout: float, say: Callable[[str], None] = print) -> str | None:
     """Drive the clock until the robot side listens and heart rate reaches the coach's input."""
     ready_since: list[float] = []
     dead: list[ManagedProcess] = []
 
     def ready() -> bool:
         watcher.advance(clock)
+        watcher.lab_step(say)
         dead[:] = [p for p in group.procs if p.returncode is not None]
         if dead:
             return True
@@ -345,7 +434,8 @@ def wait_for_system(watcher: ClockAndWatcher, group: ProcessGroup, clock: SimClo
             # The strap's HR proves LSL -> ROS 2; the coach's own input must flow too (the
             # processor's first HR needs a full window of ECG).
             hr_flowing = view.strap_samples >= 2 and view.hr_seen >= 1
-        if hr_flowing and watcher.robot_side_ready():
+        hosts_up = watcher.hosts is None or watcher.hosts.all_up()
+        if hr_flowing and hosts_up and watcher.robot_side_ready():
             ready_since[:] = ready_since or [time.monotonic()]
             return time.monotonic() - ready_since[0] >= SETTLE
         return False
@@ -359,8 +449,10 @@ def wait_for_system(watcher: ClockAndWatcher, group: ProcessGroup, clock: SimClo
         return "interrupted during start-up"
     with watcher.lock:
         strap = view.strap_samples
+        waiting = [] if watcher.hosts is None else watcher.hosts.waiting_for()
+    hosts = f"; lab hosts not heard: {', '.join(waiting)}" if waiting else ""
     return (f"the system was not ready after {timeout:g} s (strap heart-rate samples on ROS 2: {strap}; "
-            f"robot side listening: {watcher.robot_side_ready()}); see the folder's logs/")
+            f"robot side listening: {watcher.robot_side_ready()}{hosts}); see the folder's logs/")
 
 
 class Supervision:
@@ -410,14 +502,16 @@ class Supervision:
 
 
 def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder, console: SessionConsole,
-                view: SessionView, group: ProcessGroup, stop: threading.Event, out: Outcome) -> SimClock:
+                view: SessionView, group: ProcessGroup, stop: threading.Event, out: Outcome,
+                lab: LabRun | None = None) -> SimClock:
     """Start the nodes, wait for them, run the routine to its end (or a stop); returns the sim clock."""
     receivers = {name: topic for name, (topic, _rate) in plan.receivers.items()}
     # A simulated participant's loop can be held to the clock; a real strap lives in real time.
     guard = None if options.polar else ClockGuard(hr_wait=plan.coach.hr_wait)
     strap = next((n.name for n in plan.nodes if n.script == POLAR_STREAMER), None)
     supervisor = Supervisor(options.max_restarts)
-    watcher = ClockAndWatcher(view, plan.hr_topic, receivers, plan.listeners, guard, strap, supervisor)
+    hosts = None if lab is None else HostWatch(lab.lab, lab.role)
+    watcher = ClockAndWatcher(view, plan.hr_topic, receivers, plan.listeners, guard, strap, supervisor, hosts)
     rates = {name: rate for name, (_topic, rate) in plan.receivers.items()}
     supervision = Supervision(supervisor, group, watcher, console, out, rates)
     # The clock runs at --speed from the beginning: before 'start' the participant sits and the
@@ -425,7 +519,7 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
     clock = SimClock(start=float(int(time.time())), speed=options.speed)
     try:
         start_nodes(group, plan, folder)
-        problem = wait_for_system(watcher, group, clock, view, stop, options.startup_timeout)
+        problem = wait_for_system(watcher, group, clock, view, stop, options.startup_timeout, console.say)
         if problem:
             out.fail(problem)
             return clock
@@ -436,6 +530,7 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
 
         def finished() -> bool:
             watcher.advance(clock)
+            watcher.lab_step(console.say)
             if supervision.step(clock.t, coach):
                 return True
             with watcher.lock:
@@ -460,6 +555,7 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
 
             def tail_done() -> bool:
                 watcher.advance(clock)
+                watcher.lab_step(console.say)
                 return supervision.step(clock.t, coach) or clock.t >= end
 
             drive(tail_done, clock, stop)
@@ -467,6 +563,11 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
     finally:
         if out.stopped_by:
             console.say(f"{out.stopped_by}: stopping the session")
+        if lab is not None:
+            watcher.lab_step(console.say)
+            watcher.end_lab_session(clock.t)
+            lab.hosts, lab.outages = hosts, hosts.outages if hosts is not None else []
+            lab.wall_offsets = dict(watcher.wall_offsets)
         out.node_codes = group.stop()
         out.stop_seconds = dict(group.stop_seconds)
         supervision.report()
@@ -507,7 +608,8 @@ def _report(folder: SessionFolder, console: SessionConsole) -> list[str] | None:
 
 def _summary_json(options: SessionConfig, plan: SessionPlan, folder: SessionFolder, claim: DomainClaim,
                   started: datetime, view: SessionView, out: Outcome, group: ProcessGroup,
-                  clock: SimClock | None, report: list[str] | None, running: bool = False) -> dict[str, Any]:
+                  clock: SimClock | None, report: list[str] | None, running: bool = False,
+                  lab: LabRun | None = None) -> dict[str, Any]:
     procs = {p.name: p for p in group.procs}
     counts = session_counts(view)
     if running:
@@ -516,7 +618,9 @@ def _summary_json(options: SessionConfig, plan: SessionPlan, folder: SessionFold
         outcome = counts["outcome"]  # finished, stopped (a signal), not started, conflict
     else:
         outcome = "failed"
+    extra = {} if lab is None else {"lab": lab.summary()}
     return {
+        **extra,
         "participant": plan.coach.participant,
         "folder": str(folder.path.resolve()),
         "started": started.isoformat(timespec="seconds"),
@@ -557,18 +661,34 @@ def main(argv: list[str] | None = None) -> int:
             requested = parse_domain(os.environ.get("ROS_DOMAIN_ID"))
         except ValueError as exc:
             raise ConfigError(str(exc)) from None
+        lab = None
+        if options.lab:
+            try:
+                lab = load_lab(options.lab)
+            except LabError as exc:
+                raise ConfigError(str(exc)) from None
+            if requested is not None and requested != lab.ros_domain:
+                raise ConfigError(f"ROS_DOMAIN_ID={requested} differs from the lab file's ros_domain "
+                                  f"{lab.ros_domain}: unset ROS_DOMAIN_ID (the lab file says the domain)")
         coach = coach_config(options)
         started = datetime.now()
-        device = options.device_id or new_device_id()
+        device = options.device_id or (lab.device_id if lab is not None else new_device_id())
+        label = coach.participant if lab is None or options.role == "station" else (
+            f"{coach.participant}_{options.role}")
         # Every node's configuration, checked before anything starts (on the folder it would get).
-        plan_session(options, SessionFolder.plan(options.out, coach.participant, started), device, coach)
+        plan_session(options, SessionFolder.plan(options.out, label, started), device, coach)
     except ConfigError as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr, flush=True)
         return 2
-    folder = SessionFolder.plan(options.out, coach.participant, started)
+    folder = SessionFolder.plan(options.out, label, started)
     try:
-        info = holder_info(folder.path.resolve(), started.isoformat(timespec="seconds"))
-        claim = claim_domain(requested, info)
+        if lab is not None:
+            info = holder_info(folder.path.resolve(), started.isoformat(timespec="seconds"),
+                               f"lab {lab.lab} {options.role}")
+            claim = claim_lab_domain(lab.ros_domain, options.role, info)
+        else:
+            info = holder_info(folder.path.resolve(), started.isoformat(timespec="seconds"))
+            claim = claim_domain(requested, info)
     except DomainInUse as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr, flush=True)
         return 1
@@ -579,19 +699,33 @@ def main(argv: list[str] | None = None) -> int:
                 folder.create()
                 break
             except FileExistsError:  # the same participant started another session this second
-                folder = SessionFolder.plan(options.out, coach.participant, started)
+                folder = SessionFolder.plan(options.out, label, started)
             except OSError as exc:
                 print(f"{PROG}: error: cannot create the session folder {folder.path}: {exc.strerror}",
                       file=sys.stderr, flush=True)
                 return 1
         plan = plan_session(options, folder, device, coach)
-        return _run(options, plan, folder, claim, started)
+        if lab is None:
+            return _run(options, plan, folder, claim, started)
+        # Discovery opened as far as the lab file says, for this process's node and every child.
+        env = ros_environment(lab, options.role)
+        os.environ.update(env)
+        cfg = folder.path / "lsl_api.cfg"
+        cfg.write_text(lsl_config(lab, options.role), encoding="utf-8")
+        os.environ["LSLAPICFG"] = str(cfg.resolve())
+        run = LabRun(lab, options.role, env, cfg.name)
+        plan = for_role(plan, options.role)
+        if options.role != "station":
+            from hri_physio_bringup.lab_host import run_host
+
+            return run_host(options, lab, plan, folder, claim, started, env)
+        return _run(options, plan, folder, claim, started, run)
     finally:
         claim.release()
 
 
 def _run(options: SessionConfig, plan: SessionPlan, folder: SessionFolder, claim: DomainClaim,
-         started: datetime) -> int:
+         started: datetime, lab: LabRun | None = None) -> int:
     out = Outcome()
     stop = install_stop_handlers(lambda name: setattr(out, "stopped_by", name))
     console = make_console(options, f"HRI Physio session {plan.coach.participant}")
@@ -606,11 +740,14 @@ def _run(options: SessionConfig, plan: SessionPlan, folder: SessionFolder, claim
     domain = (f"ROS domain {claim.domain} (export ROS_DOMAIN_ID={claim.domain} to watch it)" if claim.chosen
               else f"ROS domain {claim.domain} (ROS_DOMAIN_ID)")
     console.say(f"[session] folder {folder.display()}; {domain}; LSL streams PolarH10/{plan.device_id}/*")
+    if lab is not None:
+        console.say(describe(lab.lab, lab.role))
+        console.say(f"[lab] waiting for the hosts: {', '.join(HostWatch(lab.lab, lab.role).waiting_for())}")
     folder.write_summary(_summary_json(options, plan, folder, claim, started, view, out, group, None, None,
                                        running=True))
     clock: SimClock | None = None
     try:
-        clock = run_session(options, plan, folder, console, view, group, stop, out)
+        clock = run_session(options, plan, folder, console, view, group, stop, out, lab)
     finally:
         console.close()
         bag = folder.bag if not options.no_record and folder.bag.exists() else None
@@ -626,7 +763,7 @@ def _run(options: SessionConfig, plan: SessionPlan, folder: SessionFolder, claim
             out.fail("the session did not reach its end")
         report = _report(folder, console) if bag is not None and not options.no_report else None
         folder.write_summary(_summary_json(options, plan, folder, claim, started, view, out, group, clock,
-                                           report))
+                                           report, lab=lab))
         if out.problem:
             print(f"{PROG}: error: {out.problem}", file=sys.stderr, flush=True)
         console.say(f"[session] session folder: {folder.display()}")
