@@ -40,6 +40,8 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 from scipy.signal import lfilter
 
+from hri_physio_coach.policies.response_model import ResponseHistory
+
 
 @dataclass(frozen=True)
 class Estimate:
@@ -78,7 +80,7 @@ class Estimate:
         return float(self.theta[-1])
 
 
-class ResponseEstimator:
+class ResponseEstimator(ResponseHistory):
     """Settings performed over time and the window means seen; :meth:`fit` identifies the response."""
 
     def __init__(self, rest: float, tau_fast: float = 6.0, dead_time: float = 5.0, fast_share: float = 0.3,
@@ -90,6 +92,7 @@ class ResponseEstimator:
         if not 0 < tau_bounds[0] < tau_prior < tau_bounds[1]:
             raise ValueError(f"need 0 < tau_bounds[0] < tau_prior < tau_bounds[1], got {tau_bounds}, "
                              f"{tau_prior}")
+        super().__init__()
         self.rest = rest
         self.tau_fast = tau_fast
         self.dead_time = dead_time
@@ -102,26 +105,7 @@ class ResponseEstimator:
         self.noise = noise
         self.recency = recency
         self.per_met_sd = per_met_sd
-        self.settings: list[tuple[float, Hashable, float]] = []  # (since t, level, drive)
-        self.windows: list[tuple[float, float, float]] = []  # (from t, to t, mean bpm)
         self._last_tau = tau_prior
-
-    # --- data -----------------------------------------------------------------------------------
-    def set(self, t: float, level: Hashable, drive: float) -> None:
-        """From ``t`` on the person performs ``level`` at ``drive`` (the ladder's multiplier)."""
-        if self.settings and t < self.settings[-1][0]:
-            raise ValueError(f"settings must come in time order ({t} < {self.settings[-1][0]})")
-        if self.settings and self.settings[-1][1:] == (level, drive):
-            return
-        self.settings.append((t, level, drive))
-
-    def add_window(self, t0: float, t1: float, mean: float) -> None:
-        """The mean heart rate over ``(t0, t1]``."""
-        if t1 > t0 and math.isfinite(mean):
-            self.windows.append((t0, t1, mean))
-
-    def levels_seen(self) -> list[Hashable]:
-        return list(dict.fromkeys(level for _, level, _ in self.settings))
 
     # --- the model's columns --------------------------------------------------------------------
     def _inputs(self, start: float, n: int, levels: list[Hashable]) -> np.ndarray:

@@ -35,21 +35,10 @@ class ResponseFit:
     windows: int
 
 
-class ResponseModel:
-    """Settings performed over time and the HR means seen; :meth:`fit` explains the one by the other."""
+class ResponseHistory:
+    """What a person performed over time (level and drive, from a time on) and the HR means seen."""
 
-    def __init__(self, rest: float, fast_share: float = 0.35, tau_fast: float = 10.0, dead_time: float = 8.0,
-                 taus: Sequence[float] = TAU_GRID, recency: float = 300.0) -> None:
-        if not 0.0 <= fast_share <= 1.0:
-            raise ValueError(f"fast_share must be in [0, 1], got {fast_share}")
-        if tau_fast <= 0 or dead_time < 0 or recency <= 0 or not taus or min(taus) <= 0:
-            raise ValueError("time constants and recency must be > 0 s, dead time >= 0 s")
-        self.rest = rest
-        self.fast_share = fast_share
-        self.tau_fast = tau_fast
-        self.dead_time = dead_time
-        self.taus = tuple(float(t) for t in taus)
-        self.recency = recency
+    def __init__(self) -> None:
         self.settings: list[tuple[float, Hashable, float]] = []  # (since t, level, drive)
         self.windows: list[tuple[float, float, float]] = []  # (from t, to t, mean bpm)
 
@@ -66,8 +55,27 @@ class ResponseModel:
         if t1 > t0 and math.isfinite(mean):
             self.windows.append((t0, t1, mean))
 
-    def levels_seen(self) -> set[Hashable]:
-        return {level for _, level, _ in self.settings}
+    def levels_seen(self) -> list[Hashable]:
+        """The levels performed so far, in the order first performed."""
+        return list(dict.fromkeys(level for _, level, _ in self.settings))
+
+
+class ResponseModel(ResponseHistory):
+    """Settings performed over time and the HR means seen; :meth:`fit` explains the one by the other."""
+
+    def __init__(self, rest: float, fast_share: float = 0.35, tau_fast: float = 10.0, dead_time: float = 8.0,
+                 taus: Sequence[float] = TAU_GRID, recency: float = 300.0) -> None:
+        if not 0.0 <= fast_share <= 1.0:
+            raise ValueError(f"fast_share must be in [0, 1], got {fast_share}")
+        if tau_fast <= 0 or dead_time < 0 or recency <= 0 or not taus or min(taus) <= 0:
+            raise ValueError("time constants and recency must be > 0 s, dead time >= 0 s")
+        super().__init__()
+        self.rest = rest
+        self.fast_share = fast_share
+        self.tau_fast = tau_fast
+        self.dead_time = dead_time
+        self.taus = tuple(float(t) for t in taus)
+        self.recency = recency
 
     def _inputs(self, start: float, n: int) -> dict[Hashable, np.ndarray]:
         """Per level, the drive applied in each second since ``start`` (0 while another level runs)."""
