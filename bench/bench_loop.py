@@ -122,7 +122,7 @@ def node_name(pid: int) -> str:
 class LatencyProbe:
     """Arrival of each strap HR sample on LSL and on the coach's input topic, by its own stamp."""
 
-    def __init__(self, device: str, topic: str) -> None:
+    def __init__(self, device: str, topic: str, domain: int) -> None:
         import rclpy
         from std_msgs.msg import Float64MultiArray
 
@@ -137,7 +137,7 @@ class LatencyProbe:
         self._stop = threading.Event()
         self._lock = threading.Lock()
         self.context = rclpy.Context()
-        rclpy.init(context=self.context)
+        rclpy.init(context=self.context, domain_id=domain)  # the session's, whatever this shell says
         self.node = rclpy.create_node(f"bench_loop_{uuid.uuid4().hex[:6]}", context=self.context)
 
         def on_frame(msg: Float64MultiArray) -> None:
@@ -204,27 +204,34 @@ def run_loop(label: str, seconds: float, settle: float, env: dict[str, str] | No
     env = dict(os.environ) if env is None else env
     device = "BENCH" + uuid.uuid4().hex[:6].upper()
     out = Path(tempfile.mkdtemp(prefix="bench_loop_"))
-    probe = LatencyProbe(device, "/physio/polar_h10/hr")
     cmd = [shutil.which(LAUNCHER, path=env["PATH"]) or LAUNCHER, "--speed", "1", "--out", str(out),
            "--device-id", device, "--no-report"]
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     ready = threading.Event()
     lines: list[str] = []
+    domain: list[int] = []  # the session's ROS domain, as it announces it (it claims a free one)
 
     def read() -> None:
         assert proc.stdout is not None
         for line in proc.stdout:
             lines.append(line.rstrip())
+            found = re.search(r"ROS domain (\d+)", line)
+            if found and not domain:
+                domain.append(int(found.group(1)))
             if "system ready" in line:
                 ready.set()
 
     threading.Thread(target=read, daemon=True).start()
     result = LoopResult(label, seconds)
+    probe: LatencyProbe | None = None
     try:
         deadline = time.monotonic() + 300
         while not ready.wait(0.5):
             if proc.poll() is not None or time.monotonic() > deadline:
                 raise RuntimeError(f"{label}: the session did not start:\n" + "\n".join(lines[-20:]))
+        if not domain:
+            raise RuntimeError(f"{label}: the session did not say its ROS domain:\n" + "\n".join(lines[-20:]))
+        probe = LatencyProbe(device, "/physio/polar_h10/hr", domain[0])
         time.sleep(settle)
         pids = {proc.pid: LAUNCHER, **{p: node_name(p) for p in descendants(proc.pid)}}
         start = {pid: cpu_seconds(pid) for pid in pids}
@@ -252,7 +259,8 @@ def run_loop(label: str, seconds: float, settle: float, env: dict[str, str] | No
                 proc.wait(90)
             except subprocess.TimeoutExpired:
                 proc.kill()
-        probe.close()
+        if probe is not None:
+            probe.close()
         shutil.rmtree(out, ignore_errors=True)
     bad = [line for line in lines if "node exit statuses" in line or ": error:" in line]
     if bad:  # a node that hung on its way out, or crashed: the figures are not to be trusted

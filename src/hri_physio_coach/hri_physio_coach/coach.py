@@ -15,6 +15,7 @@ import functools
 import math
 import random
 import string
+from collections import deque
 from collections.abc import Callable, Mapping
 from decimal import ROUND_HALF_UP, Decimal
 from pathlib import Path
@@ -152,6 +153,11 @@ class ExerciseCoach(Listener):
         self._tempos = tuple(tempo_from_name(s) for s in self.ladder.suffixes)
         self._buffer_since = 0.0
         self._pending_rule: tuple[float, Timer] | None = None  # (rule time, its deadline timer)
+        #: Commands sent and not answered yet by qt_controller: (session time sent, line), oldest first.
+        #: Kept once a reply has been seen: a coach driven without a controller (the offline
+        #: evaluation, a bare test) gets no replies and expects none.
+        self._awaiting: deque[tuple[float, str]] = deque()
+        self._replies_seen = False
         #: A calibration waiting for its last heart rate: (end of the phase, its deadline timer).
         self._pending_calibration: tuple[float, Timer] | None = None
         #: The plan of a phase that started while the calibration before it still waited: (phase, start).
@@ -192,6 +198,7 @@ class ExerciseCoach(Listener):
         if self.engine.running:
             self._check_hr_timeout(now)
             self._check_pending(now)
+            self._check_unanswered(now)
         self.engine.tick(now)
         if self.engine.running and self._gesture_next is not None and now >= self._gesture_next:
             assert self._gesture is not None  # set with _gesture_next
@@ -211,6 +218,14 @@ class ExerciseCoach(Listener):
 
     def on_reply(self, reply: Mapping[str, Any]) -> None:
         """A reply of qt_controller; failures are logged as events and the session goes on."""
+        self._replies_seen = True
+        line = str(reply.get("command", "")).strip()
+        # The newest command with this text: after an outage, older ones went to a controller that
+        # was down (replies come in order, so a pair both answered is settled either way).
+        for i in range(len(self._awaiting) - 1, -1, -1):
+            if self._awaiting[i][1] == line:
+                del self._awaiting[i]
+                break
         if not reply.get("ok", True):
             self._emit({"t": self.engine.now, "event": "command_failed",
                         "command": self._redact(str(reply.get("command", ""))),
@@ -258,13 +273,26 @@ class ExerciseCoach(Listener):
             self._build_failed(repr(command), str(exc), why)
             return False
         self._emit({"event": "command", "command": self._redact(line), "why": why})
+        awaited = (self.engine.now, line.strip())
+        if self._replies_seen:  # before sending: a reply may come before _send returns
+            self._awaiting.append(awaited)
         try:
             self._send(line)
         except Exception as exc:  # any transport failure must not end the session
+            if awaited in self._awaiting:
+                self._awaiting.remove(awaited)
             self._emit({"event": "command_failed", "command": self._redact(line),
                         "message": f"{type(exc).__name__}: {exc}", "source": "send"})
             return False
         return True
+
+    def _check_unanswered(self, now: float) -> None:
+        """Commands qt_controller has not answered within ``reply_timeout`` (it was down, say): each is
+        recorded once as a ``command_unanswered`` event, never sent again."""
+        while self._awaiting and now - self._awaiting[0][0] > self.cfg.reply_timeout:
+            sent, line = self._awaiting.popleft()
+            self._emit({"t": now, "event": "command_unanswered", "command": self._redact(line),
+                        "sent_t": sent, "waited": round(now - sent, 3)})
 
     def _build_failed(self, what: str, message: str, why: str) -> None:
         """A command the routine or configuration asked for that the protocol cannot carry."""

@@ -108,6 +108,9 @@ class CoachConfig(NodeConfig):
     # --- heart-rate input and signal gating ----------------------------------------------------
     hr_timeout: float = option(10.0, "time without HR before adaptation pauses (the routine goes on)",
                                unit="s", gt=0)
+    reply_timeout: float = option(30.0, "a robot command with no reply from qt_controller after this long "
+                                  "(session time; a restarting controller, say) is recorded as a "
+                                  "command_unanswered event", unit="s", gt=0)
     hr_wait: float = option(3.0, "longest the calibration or a rule update waits for the heart rate taken "
                             "before it to arrive (a rule update never past its activity's end; 0: decide "
                             "on what has arrived)",

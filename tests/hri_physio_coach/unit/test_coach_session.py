@@ -413,3 +413,29 @@ def test_activity_start_clears_the_buffer() -> None:
     s = Session(pilot_hr, rule_period=50.0).run(until=400)
     n_valid = {e["t"]: e["inputs"]["n_valid"] for e in s.of("rule_update")}
     assert n_valid == {230.0: 50, 280.0: 50, 330.0: 50, 380.0: 20}
+
+
+def test_commands_a_controller_never_answers_are_recorded_once_and_not_sent_again() -> None:
+    """Replies come, then the controller is down (a restart) for 60 s: each command sent meanwhile
+    is one command_unanswered event after reply_timeout; answered ones never are."""
+    session: Session
+
+    def send(line: str) -> None:
+        now = session.coach.engine.now
+        if not 400.0 <= now < 460.0:  # the controller's outage
+            session.coach.on_reply({"ok": True, "command": line, "message": "done"})
+
+    session = Session(lambda t, c: 140.0, send=send, reply_timeout=20.0)
+    session.run()
+    lost = [(t, c) for t, c in session.commands if 400.0 <= t < 460.0]
+    unanswered = session.of("command_unanswered")
+    assert lost and [(e["sent_t"], e["command"]) for e in unanswered] == lost
+    assert all(20.0 < e["waited"] <= 21.0 and e["t"] == pytest.approx(e["sent_t"] + e["waited"])
+               for e in unanswered)
+    assert len(session.commands) == len(session.of("command"))  # nothing was sent twice
+
+
+def test_without_any_reply_nothing_is_awaited() -> None:
+    """The offline evaluation drives the coach with no controller: no reply is expected."""
+    session = Session(lambda t, c: 140.0, reply_timeout=5.0).run()
+    assert session.commands and not session.of("command_unanswered")

@@ -50,7 +50,8 @@ PROG = COACH_NODE
 UNKNOWN_NODE_NAME = "_NODE_NAME_UNKNOWN_"
 # Events worth a line in the ROS log (all of them go to /coach/events).
 _LOGGED = {"session_start", "phase", "activity", "calibration", "zone", "rule_update", "hr_lost",
-           "hr_resumed", "command_failed", "session_end", "session_stopped", "conflict"}
+           "hr_resumed", "command_failed", "command_unanswered", "session_end", "session_stopped",
+           "conflict"}
 
 
 def _gid(info: MessageInfo) -> bytes | None:

@@ -205,18 +205,21 @@ def _behaviours(timeline: Timeline) -> dict[str, Any]:
 
 def _robot(tables: BagTables, timeline: Timeline) -> dict[str, Any]:
     commands = Counter()
-    failed = 0
+    failed = unanswered = 0
     for e in timeline.events:
         if e.get("event") == "command":
             words = str(e.get("command", "")).split()
             commands[" ".join(words[:2]) if len(words) >= 2 else (words[0] if words else "?")] += 1
         elif e.get("event") == "command_failed":
             failed += 1
+        elif e.get("event") == "command_unanswered":
+            unanswered += 1
     mock = Counter()
     for topic, msgs in tables.json.items():
         if topic.endswith("/mock/events"):
             mock.update(str(m.data.get("event")) for m in msgs)
-    return {"commands": dict(commands), "commands_failed": failed, "robot_events": dict(mock)}
+    return {"commands": dict(commands), "commands_failed": failed, "commands_unanswered": unanswered,
+            "robot_events": dict(mock)}
 
 
 def _signal_quality(tables: BagTables, timeline: Timeline, clock: SessionClock) -> dict[str, Any]:
