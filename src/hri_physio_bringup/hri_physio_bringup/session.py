@@ -543,7 +543,9 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
             if late:
                 out.fail(f"the coach did not end its session {END_MARGIN:g} s after the routine's end")
                 return True
-            return coach.returncode is not None
+            # Its normal end. Any other exit is a loss, which supervision.step names on the next round
+            # (the coach may die between that step and this look: the launcher must not name it here).
+            return coach.returncode == 0
 
         drive(finished, clock, stop)
         out.wall = time.monotonic() - wall0
