@@ -48,9 +48,6 @@ from hri_physio_bridge.waiting import Backoff, wait_for_consumers
 RATE_TOLERANCE = 0.05
 #: Seconds between two warnings about the measured rate (each says how often it was off since).
 RATE_WARNING_PERIOD = 60.0
-#: On a stop, the input is still read for what it already holds (until it is empty), for at most this
-#: long: an input that keeps delivering (a source still streaming) is cut there, with an error line.
-STOP_DRAIN = 5.0
 
 
 class ReceiverConfig(NodeConfig):
@@ -89,6 +86,11 @@ class ReceiverConfig(NodeConfig):
     min_consumers: int = option(1, "with wait_for_consumers: how many listeners to wait for, e.g. 2 for a "
                                 "processor and a recorder (ros: outputs only)", ge=1)
     interactive: bool = option(False, "text console on stdin: status, pause, resume, quit", switch=True)
+    drain_timeout: float = option(5.0, "at a stop, the most time spent taking what the input already "
+                                  "holds, plus drain_per_chunk for each chunk it holds (an input still "
+                                  "delivering after that is cut, with an error line)", unit="s", ge=0)
+    drain_per_chunk: float = option(0.01, "the time a stop allows per chunk the input already holds",
+                                    unit="s", ge=0)
     status_period: float = option(5.0, "time between progress reports", unit="s", gt=0)
 
     @field_validator("dtype")
@@ -150,6 +152,7 @@ class ReceiverStats:
     paused: bool = False
     last_timestamp: float = math.nan
     measured_rate: float | None = None  # from the timestamps (None until a few seconds are in)
+    unread_at_stop: int = 0  # input chunks (LSL: estimated) a stop left unread when its drain ran out
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -165,6 +168,7 @@ class ReceiverStats:
             "publish_errors": self.publish_errors,
             "gaps": len(self.gaps),
             "missing_samples": sum(g.count for g in self.gaps),
+            "unread_at_stop": self.unread_at_stop,
             "clock_jumps": len(self.clock_jumps),
             "reconnects": self.reconnects,
             "last_timestamp": self.last_timestamp,
@@ -374,7 +378,7 @@ class PhysioReceiver:
         self._resume.set()
         for t in self._threads:
             if t.name == "receiver-producer":
-                t.join(timeout)
+                t.join(timeout + self._drain_budget())
         if self.buffer is not None:
             self.buffer.close()
         for t in self._threads:
@@ -405,15 +409,23 @@ class PhysioReceiver:
             self._accept(chunk)
         self._take_what_arrived()
 
+    def _drain_budget(self) -> float:
+        """The time a stop allows for taking what the input holds: it scales with what is queued."""
+        return self.config.drain_timeout + self.config.drain_per_chunk * self.source.backlog()
+
     def _take_what_arrived(self) -> None:
-        """On a stop: what the input already holds is forwarded too, until it is empty (at most
-        ``STOP_DRAIN`` s; what an input still delivering after that is left unread is said as an error)."""
-        deadline = self._monotonic() + STOP_DRAIN
+        """On a stop: what the input already holds is forwarded too, until it is empty (within
+        :meth:`_drain_budget`; what an input still delivering after that is left unread is said as an error)."""
+        budget = self._drain_budget()
+        deadline = self._monotonic() + budget
         taken = 0
         while True:
             if self._monotonic() >= deadline:
-                self.log.error(f"stopping: {self.source.uri} still delivered after {STOP_DRAIN:g} s of "
-                               f"taking what had arrived ({taken} sample(s) taken); the rest is left unread")
+                left = self.source.backlog()
+                self.log.error(f"stopping: {self.source.uri} still delivered after {budget:g} s of "
+                               f"taking what had arrived ({taken} sample(s) taken, about {left} chunk(s) "
+                               f"left unread; drain_timeout {self.config.drain_timeout:g} s)")
+                self.stats.unread_at_stop = left
                 break
             try:
                 chunk = self.source.receive(timeout=0.0)

@@ -693,3 +693,50 @@ def test_an_input_that_keeps_delivering_at_the_stop_is_cut_with_an_error_line(
     # published whole, in order.
     np.testing.assert_array_equal(published, np.arange(len(published)))
     assert len(published) >= 490
+
+
+class BackloggedSource(EndlessSource):
+    """An input holding ``held`` chunks at the stop; taking each costs 0.02 s of the (fake) clock, so
+    taking them all lasts longer than drain_timeout alone."""
+
+    def __init__(self, spec: StreamSpec, now: list[float], held: int) -> None:
+        super().__init__(spec, now)
+        self.held = held
+
+    def backlog(self) -> int:
+        return self.held if self.stopping.is_set() else 0
+
+    def receive(self, timeout: float = 0.1) -> Frame | None:
+        if self.stopping.is_set() and self.held == 0:
+            return None
+        frame = super().receive(timeout)
+        if frame is not None:
+            self.now[0] += 0.01
+            self.held -= 1
+        return frame
+
+
+@pytest.mark.parametrize("per_chunk, all_taken", [(0.2, True), (0.0, False)])
+def test_the_stops_drain_time_scales_with_what_the_input_holds(
+        per_chunk: float, all_taken: bool, caplog: pytest.LogCaptureFixture) -> None:
+    """500 chunks at 0.11 s each: 55 s, far past drain_timeout (5 s). With drain_per_chunk the stop
+    allows for them and forwards every sample, without an error; without it, the rest is an error
+    naming what was left, and counted in the status."""
+    now = [0.0]
+    cfg = ReceiverConfig.from_mapping({"input": "mem:source", "output": "mem:sink", "sampling_rate": 100,
+                                       "output_frame": 10, "drain_per_chunk": per_chunk})
+    src = BackloggedSource(StreamSpec("src", nominal_rate=100.0), now, held=500)
+    sink = MemorySink()
+    rx = PhysioReceiver(cfg, src, sink, log=logging.getLogger("test"), monotonic=lambda: now[0])
+    rx.start()
+    src.stopping.set()
+    with caplog.at_level(logging.INFO, logger="test"):
+        rx.stop()
+    errors = [r.getMessage() for r in caplog.records if r.levelno == logging.ERROR]
+    published = np.concatenate([f.values[:, 0] for f in sink.frames])
+    np.testing.assert_array_equal(published, np.arange(len(published)))
+    if all_taken:
+        assert errors == [] and len(published) == 5000 and rx.status()["unread_at_stop"] == 0
+    else:
+        assert len(errors) == 1 and "chunk(s) left unread" in errors[0], errors
+        assert len(published) < 5000 and rx.status()["unread_at_stop"] == src.held > 0

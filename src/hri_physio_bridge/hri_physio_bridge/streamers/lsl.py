@@ -155,6 +155,16 @@ class LslStreamer(Streamer):
         self._dtype = numpy_dtype(spec.dtype)
         return spec
 
+    def backlog(self) -> int:
+        """Chunks the inlet already holds (samples waiting, in chunks of ``max_chunk``)."""
+        if self._inlet is None:
+            return 0
+        try:
+            waiting = int(self._inlet.samples_available())
+        except pylsl.util.LostError:
+            return 0
+        return -(-waiting // self.max_chunk)
+
     def receive(self, timeout: float = 0.1) -> Frame | None:
         if self._inlet is None or self.spec is None:
             raise StreamerError(f"{self.uri} is not open as an input")
