@@ -49,6 +49,9 @@ class RecorderConfig(NodeConfig):
     compression: Literal["zstd", "none"] = option("zstd", "chunk compression")
     qos_depth: int = option(10000, "subscription queue depth; must hold what a topic sends in one "
                             "poll period", unit="messages", ge=1)
+    drain_timeout: float = option(10.0, "at a stop, the most time spent writing what the subscriptions "
+                                  "already hold (up to qos_depth per topic); a topic still delivering after "
+                                  "that is left, with an error line", unit="s", gt=0)
     poll_period: float = option(0.02, "time between takes of queued messages while they flow; receive "
                                 "stamps come from the middleware, so this only delays the disk",
                                 unit="s", gt=0)

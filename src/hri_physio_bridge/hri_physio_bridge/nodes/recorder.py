@@ -119,6 +119,18 @@ def drain_subscriptions(
     return taken, more
 
 
+def drain_within(step: Callable[[], tuple[int, bool]], timeout: float,
+                 clock: Callable[[], float] = time.monotonic) -> tuple[int, bool]:
+    """Repeat ``step`` (a pass of :func:`drain_subscriptions`) while it leaves more, for at most
+    ``timeout`` s after the first pass. Returns how many were taken and whether more was left."""
+    deadline = clock() + timeout
+    taken, more = step()
+    while more and clock() < deadline:
+        step_taken, more = step()
+        taken += step_taken
+    return taken, more
+
+
 class RecorderNode(ManagedNode):
     """Records the selected topics into a new bag until stopped.
 
@@ -201,12 +213,27 @@ class RecorderNode(ManagedNode):
                 tasks.run_due()
                 if not more:
                     stop.wait(cfg.poll_period)
-            while drain_subscriptions(self.subs, session.on_message)[1]:
-                pass  # stopping: what arrived since the last pass goes into the bag too
+            code = self._drain_at_stop()
         except (BagError, OSError) as exc:
             log.error(f"recording failed: {exc}")
             code = 1
         return self._close_bag() or code
+
+    def _drain_at_stop(self) -> int:
+        """Stopping: what arrived since the last pass goes into the bag too, within ``drain_timeout``.
+
+        A topic still delivering after that (a publisher that did not stop) is left, said as an error.
+        """
+        timeout = self.config.drain_timeout
+        taken, more = drain_within(lambda: drain_subscriptions(self.subs, self.session.on_message), timeout)
+        if more:
+            self.get_logger().error(
+                f"stopping: messages still arrived after drain_timeout ({timeout:g} s; {taken} written "
+                f"since the stop); what came after is not in the bag")
+            return 1
+        if taken:
+            self.get_logger().info(f"stopping: wrote the {taken} message(s) that arrived before the stop")
+        return 0
 
     def _close_bag(self) -> int:
         if self.writer.closed:

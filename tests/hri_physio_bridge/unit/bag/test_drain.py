@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections import deque
 from typing import Any
 
-from hri_physio_bridge.nodes.recorder import drain_subscriptions
+from hri_physio_bridge.nodes.recorder import drain_subscriptions, drain_within
 
 
 class FakeHandle:
@@ -61,3 +61,22 @@ def test_exactly_budget_waiting_reports_more_then_empties() -> None:
     assert drain_subscriptions(subs, lambda t, d, i: got.append(d), budget=4) == (4, True)
     assert drain_subscriptions(subs, lambda t, d, i: got.append(d), budget=4) == (0, False)
     assert len(got) == 4
+
+
+def test_a_stops_drain_takes_every_pass_until_empty() -> None:
+    passes = deque([(2000, True), (2000, True), (7, False)])
+    assert drain_within(passes.popleft, timeout=10.0, clock=lambda: 0.0) == (4007, False)
+    assert not passes
+
+
+def test_a_topic_that_never_runs_dry_is_cut_at_the_drain_timeout() -> None:
+    """A publisher that did not stop: each pass takes 2000 and 1 s of the (fake) clock; the drain
+    ends after drain_timeout with more left, which the recorder says as an error."""
+    now = [0.0]
+
+    def flood() -> tuple[int, bool]:
+        now[0] += 1.0
+        return 2000, True
+
+    taken, more = drain_within(flood, timeout=5.0, clock=lambda: now[0])
+    assert more and taken == 5 * 2000 and now[0] == 5.0
