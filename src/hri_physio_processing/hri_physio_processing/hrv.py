@@ -24,8 +24,6 @@ are not in ms^2) and its Welch segments can leave the end of a 5-min series out.
 from __future__ import annotations
 
 import numpy as np
-from scipy.interpolate import make_interp_spline
-from scipy.signal import lombscargle, welch
 
 RESAMPLE_HZ = 4.0
 NFFT = 4096
@@ -80,6 +78,10 @@ def resample(beat_times: np.ndarray, nn_ms: np.ndarray, fs: float = RESAMPLE_HZ)
     """NN intervals (ms) placed at the beats that end them, resampled evenly at ``fs`` (cubic)."""
     t = np.asarray(beat_times, dtype=np.float64) - float(beat_times[0])
     grid = np.arange(0.0, t[-1], 1.0 / fs)
+    # scipy is imported where it is used: the launcher imports this module (through the processor's
+    # configuration) only to validate options, and scipy.signal alone costs it a second of start-up.
+    from scipy.interpolate import make_interp_spline
+
     return make_interp_spline(t, np.asarray(nn_ms, dtype=np.float64), k=3)(grid)
 
 
@@ -103,6 +105,8 @@ def band_powers(beat_times: np.ndarray, segment_seconds: float = SEGMENT_SECONDS
     else:
         x = resample(beats[1:], nn)
         nperseg, step = segment_plan(x.shape[0], round(segment_seconds * RESAMPLE_HZ))
+        from scipy.signal import welch
+
         f, p = welch(x, fs=RESAMPLE_HZ, window="hann", nperseg=nperseg, noverlap=nperseg - step,
                      nfft=max(NFFT, nperseg), detrend="constant", scaling="density")
     df = float(f[1] - f[0])
@@ -127,5 +131,7 @@ def lomb_psd(times: np.ndarray, nn_ms: np.ndarray) -> tuple[np.ndarray, np.ndarr
     y = y - y.mean()
     f = np.fft.rfftfreq(NFFT, 1.0 / RESAMPLE_HZ)
     p = np.zeros_like(f)
+    from scipy.signal import lombscargle
+
     p[1:] = lombscargle(t, y, 2.0 * np.pi * f[1:], normalize=False)
     return f, p * 2.0 * float(t[-1]) / t.shape[0]

@@ -37,10 +37,8 @@ from collections.abc import Hashable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import minimize_scalar
-from scipy.signal import lfilter
 
-from hri_physio_coach.policies.response_model import ResponseHistory
+from hri_physio_coach.policies.response_model import ResponseHistory, first_order_lag
 
 
 @dataclass(frozen=True)
@@ -118,11 +116,10 @@ class ResponseEstimator(ResponseHistory):
         return u
 
     def _slow(self, u: np.ndarray, tau: float) -> np.ndarray:
-        a = math.exp(-1.0 / tau)
         delay = round(self.dead_time)
         if delay:
             u = np.concatenate([np.zeros((u.shape[0], delay)), u[:, :u.shape[1] - delay]], axis=1)
-        return lfilter([1.0 - a], [1.0, -a], u, axis=1)
+        return first_order_lag(u, tau, axis=1)
 
     def _design(self, slow: np.ndarray, fast: np.ndarray, ramp: np.ndarray, lo: np.ndarray,
                 hi: np.ndarray) -> np.ndarray:
@@ -173,8 +170,7 @@ class ResponseEstimator(ResponseHistory):
         age = now - np.array([s[2] for s in spans])
         w = np.sqrt(0.5 ** (age / self.recency)) / self.noise  # whitening: SD noise / sqrt(recency weight)
         u = self._inputs(start, n, levels)
-        af = math.exp(-1.0 / self.tau_fast)
-        fast = lfilter([1.0 - af], [1.0, -af], u, axis=1)
+        fast = first_order_lag(u, self.tau_fast, axis=1)
         exercising = (u.sum(axis=0) > 0).astype(float)
         ramp = np.cumsum(exercising) / 60.0  # minutes of exercise so far
         prior_rows, prior_y = self._prior(levels)
@@ -189,6 +185,8 @@ class ResponseEstimator(ResponseHistory):
             return cost, theta, aw, a
 
         bounds = (math.log(self.tau_bounds[0]), math.log(self.tau_bounds[1]))
+        from scipy.optimize import minimize_scalar  # here: see first_order_lag
+
         res = minimize_scalar(lambda x: solve(x)[0], bounds=bounds, method="bounded",
                               options={"xatol": 0.03, "maxiter": 25})
         log_tau = float(res.x)
@@ -224,8 +222,7 @@ class ResponseEstimator(ResponseHistory):
         if any(level not in levels for _, level, _ in self.settings):
             return None
         u = self._inputs(start, n, levels)
-        af = math.exp(-1.0 / self.tau_fast)
-        fast = lfilter([1.0 - af], [1.0, -af], u, axis=1)
+        fast = first_order_lag(u, self.tau_fast, axis=1)
         slow = self._slow(u, est.tau)
         exercising = (u.sum(axis=0) > 0).astype(float)
         ramp = np.cumsum(exercising) / 60.0

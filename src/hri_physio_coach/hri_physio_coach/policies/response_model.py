@@ -19,10 +19,21 @@ from collections.abc import Hashable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import lfilter
 
 #: Grid of slow time constants tried by the fit (s): people range from about 20 to 120 s.
 TAU_GRID = (30.0, 45.0, 60.0, 85.0, 120.0)
+
+
+def first_order_lag(u: np.ndarray, tau: float, axis: int = -1) -> np.ndarray:
+    """``u`` through a first-order lag of time constant ``tau`` (in samples), along ``axis``.
+
+    scipy is imported here, not at the module's top: the coach's node and the launcher import the
+    policies to list and validate them, and scipy.signal alone costs them a second of start-up.
+    """
+    from scipy.signal import lfilter
+
+    a = math.exp(-1.0 / tau)
+    return lfilter([1.0 - a], [1.0, -a], u, axis=axis)
 
 
 @dataclass(frozen=True)
@@ -88,10 +99,9 @@ class ResponseModel(ResponseHistory):
         return out
 
     def _response(self, u: np.ndarray, tau: float, fast: np.ndarray) -> np.ndarray:
-        a = math.exp(-1.0 / tau)
         delay = round(self.dead_time)
         delayed = np.concatenate([np.zeros(delay), u[:len(u) - delay]]) if delay else u
-        slow = lfilter([1.0 - a], [1.0, -a], delayed)
+        slow = first_order_lag(delayed, tau)
         return self.fast_share * fast + (1.0 - self.fast_share) * slow
 
     def fit(self, now: float) -> ResponseFit | None:
@@ -111,8 +121,7 @@ class ResponseModel(ResponseHistory):
         w = np.sqrt(0.5 ** ((now - np.array([self.windows[i][1] for i in keep])) / self.recency))
         lo = np.array([bounds[i][0] for i in keep])
         hi = np.array([bounds[i][1] for i in keep])
-        af = math.exp(-1.0 / self.tau_fast)
-        fast = {lv: lfilter([1.0 - af], [1.0, -af], inputs[lv]) for lv in levels}
+        fast = {lv: first_order_lag(inputs[lv], self.tau_fast) for lv in levels}
         best: ResponseFit | None = None
         for tau in self.taus:
             cols = []
