@@ -307,7 +307,8 @@ def add_config_arguments(parser: argparse.ArgumentParser, config_cls: type[NodeC
             group.add_argument(flag, dest=name, action="store_const", const=True, default=None,
                                help=config_cls.help_text(name))
         elif kind == "choice":
-            choices = [str(c) for c in get_args(_strip_optional(info.annotation))]
+            # An empty choice is the "not given" default (e.g. --role outside a lab): not offered.
+            choices = [str(c) for c in get_args(_strip_optional(info.annotation)) if c != ""]
             group.add_argument(flag, dest=name, choices=choices, default=None,
                                help=config_cls.help_text(name))
         else:
