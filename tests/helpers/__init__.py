@@ -130,11 +130,20 @@ class NodeProcess:
         try:
             return self.proc.wait(timeout)
         except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
+            self._abort_with_stacks()
             raise AssertionError(
                 f"process did not exit within {timeout} s after {sig}:\n{self.output}"
             ) from None
+
+    def _abort_with_stacks(self) -> None:
+        """End a process stuck on its way out with SIGABRT: a node prints every thread's stack (its
+        output then says where it was stuck); SIGKILL if even that does not end it."""
+        self.proc.send_signal(signal.SIGABRT)
+        try:
+            self.proc.wait(10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
 
     def wait(self, timeout: float = 30.0) -> int:
         """The exit status; after ``timeout`` a failure, once SIGINT let the process say what it was doing
@@ -146,8 +155,7 @@ class NodeProcess:
             try:
                 self.proc.wait(60)
             except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
+                self._abort_with_stacks()
             raise AssertionError(f"process still running after {timeout} s:\n{self.output}") from None
 
     def __enter__(self) -> NodeProcess:

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import threading
+import time
 import uuid
+from collections.abc import Callable, Iterable
 from typing import Any
 
 
@@ -15,6 +17,21 @@ def clock_message(t: float) -> Any:
     msg.clock.sec = int(t)
     msg.clock.nanosec = min(round((t - int(t)) * 1e9), 999_999_999)
     return msg
+
+
+def wait_all_acked(publishers: Iterable[Any], timeout: float,
+                   clock: Callable[[], float] = time.monotonic) -> bool:
+    """Wait until every publisher's reliable subscribers have acknowledged what it sent, within one
+    ``timeout`` shared by all: a node closing twenty outputs waits ``timeout`` at most, not twenty
+    times it (on a busy machine the sum outlasted the launcher's patience). True if all were acked."""
+    from rclpy.duration import Duration
+
+    deadline = clock() + timeout
+    acked = True
+    for pub in publishers:
+        left = max(0.0, deadline - clock())
+        acked = bool(pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9)))) and acked
+    return acked
 
 
 class ExecutorThread:

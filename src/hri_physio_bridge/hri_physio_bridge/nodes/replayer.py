@@ -28,6 +28,7 @@ from hri_physio_bridge.bag.playback import NS, PlaybackOptions, Player
 from hri_physio_bridge.bag.reader import BagMessage, BagReader
 from hri_physio_bridge.bag.topic_selection import TopicSelector
 from hri_physio_bridge.node_runner import ManagedNode, run_node
+from hri_physio_bridge.ros_tools import wait_all_acked
 from hri_physio_bridge.waiting import wait_until
 
 PROG = "physio_replayer"
@@ -180,7 +181,6 @@ class ReplayerNode(ManagedNode):
         self.clock_pub.publish(Clock(clock=Time(sec=t_ns // NS, nanosec=t_ns % NS)))
 
     def run(self, stop: threading.Event) -> int:
-        from rclpy.duration import Duration
 
         cfg, bag, log, pubs = self.config, self.bag, self.get_logger(), self.pubs
         if cfg.wait_for_subscribers > 0:
@@ -210,8 +210,7 @@ class ReplayerNode(ManagedNode):
         except BagError as exc:
             log.error(str(exc))
             return 1
-        for pub in pubs.values():
-            pub.wait_for_all_acked(Duration(seconds=2.0))
+        wait_all_acked(pubs.values(), 2.0)
         log.info(
             f"played {stats.messages} messages in {stats.passes} pass(es)"
             f"{f', {stats.clock_ticks} clock ticks' if self.clock_pub else ''}"

@@ -10,6 +10,7 @@ from __future__ import annotations
 import queue
 import threading
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from rclpy.duration import Duration
@@ -164,12 +165,20 @@ class RosStreamer(Streamer):
     def consumer_count(self) -> int:
         return self._pub.get_subscription_count() if self._pub is not None else 0
 
-    def close(self) -> None:
+    @property
+    def publisher(self) -> Any:
+        """The output's rclpy publisher (None unless open as an output)."""
+        return self._pub
+
+    def close(self, ack_timeout: float = 1.0) -> None:
+        """Close; an output first waits up to ``ack_timeout`` s for its last frames to be acknowledged
+        (0 when the caller already waited for several outputs at once: ``ros_tools.wait_all_acked``)."""
         if self._sub is not None:
             self.node.destroy_subscription(self._sub)
             self._sub = None
         if self._pub is not None:
             # Reliable delivery of the last frames before the publisher goes away.
-            self._pub.wait_for_all_acked(Duration(seconds=1.0))
+            if ack_timeout > 0:
+                self._pub.wait_for_all_acked(Duration(nanoseconds=int(ack_timeout * 1e9)))
             self.node.destroy_publisher(self._pub)
             self._pub = None

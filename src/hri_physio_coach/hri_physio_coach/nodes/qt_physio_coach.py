@@ -25,7 +25,6 @@ import sys
 import threading
 from typing import Any
 
-from rclpy.duration import Duration
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.subscription import MessageInfo
 from rclpy.time_source import CLOCK_TOPIC
@@ -38,6 +37,7 @@ from hri_physio_bridge.node_runner import ManagedNode, run_node
 from hri_physio_bridge.qos import command_qos, event_qos, frame_qos, latched_qos
 from hri_physio_bridge.rate_limit import RateLimitedLog
 from hri_physio_bridge.ros_frames import msg_to_frame
+from hri_physio_bridge.ros_tools import wait_all_acked
 from hri_physio_coach.coach import CoachError, ExerciseCoach
 from hri_physio_coach.config import COACH_NODE, CoachNodeConfig
 from hri_physio_coach.conflicts import SECOND_CLOCK, SECOND_COACH, EchoFilter, SourceWatch
@@ -277,8 +277,7 @@ class QtPhysioCoachNode(ManagedNode):
         return 0
 
     def flush(self, timeout: float = 2.0) -> None:
-        for pub in (self.commands, self.events, self.state_pub):
-            pub.wait_for_all_acked(Duration(seconds=timeout))
+        wait_all_acked((self.commands, self.events, self.state_pub), timeout)
 
 
 def to_json(event: dict[str, Any]) -> str:

@@ -29,12 +29,14 @@ import sys
 import threading
 from typing import Any
 
-from rclpy.duration import Duration
 from std_msgs.msg import String
 
 from hri_physio_bridge.node_runner import ManagedNode, logic_logger, run_node
 from hri_physio_bridge.qos import event_qos
+from hri_physio_bridge.ros_tools import wait_all_acked
 from hri_physio_bridge.streamers import Streamer, StreamerError, StreamSpec, create_streamer
+from hri_physio_bridge.streamers.lsl import LINGER, LslStreamer
+from hri_physio_bridge.streamers.ros import RosStreamer
 from hri_physio_processing.config import ProcessorConfig
 from hri_physio_processing.features import SCALARS, SIGNAL_FEATURES
 from hri_physio_processing.pipeline import ProcessingPipeline
@@ -102,11 +104,21 @@ class NeurokitProcessorNode(ManagedNode):
 
     def close(self) -> None:
         self.pipeline.source.close()
-        for sinks in self.outputs.values():
-            for sink in sinks:
-                sink.close()  # a ROS output waits (up to 1 s) until its last frames are acknowledged
+        sinks = [sink for feature_sinks in self.outputs.values() for sink in feature_sinks]
+        # The last frames of every ROS output (and the status) acknowledged, within one second for all.
+        wait_all_acked([*(s.publisher for s in sinks if isinstance(s, RosStreamer)), self.status_pub], 1.0)
+        lingered = False
+        for sink in sinks:
+            if isinstance(sink, RosStreamer):
+                sink.close(ack_timeout=0.0)
+            elif isinstance(sink, LslStreamer):
+                # liblsl has no flush: one short linger gives every outlet's inlets their last chunk.
+                listened = sink.has_consumers()
+                sink.close(linger=0.0 if lingered else LINGER)
+                lingered = lingered or listened
+            else:
+                sink.close()
         self.outputs.clear()
-        self.status_pub.wait_for_all_acked(Duration(seconds=1.0))
 
 
 def main(argv: list[str] | None = None) -> int:
