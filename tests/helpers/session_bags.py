@@ -239,7 +239,10 @@ def check_counter(stamps: np.ndarray, rate: float, gaps: list[tuple[float, float
     in the bag, or inside a recorded gap of its receiver; none twice, none out of order. Returns the
     samples the gaps account for."""
     steps = np.diff(stamps) * rate
-    assert np.all(steps > 0.5), "duplicated or reordered samples"
+    bad = np.flatnonzero(steps <= 0.5)
+    assert not len(bad), (f"{len(bad)} duplicated or reordered sample(s) of {len(stamps)}, first at index "
+                          f"{bad[0] if len(bad) else -1}: stamps around it "
+                          f"{stamps[max(0, bad[0] - 3):bad[0] + 5].tolist() if len(bad) else []}")
     assert np.all(np.abs(steps - np.round(steps)) < 0.01), "samples off the strap's grid"
     accounted = 0
     for i in np.flatnonzero(steps > 1.5):

@@ -153,6 +153,7 @@ class ReceiverStats:
     last_timestamp: float = math.nan
     measured_rate: float | None = None  # from the timestamps (None until a few seconds are in)
     unread_at_stop: int = 0  # input chunks (LSL: estimated) a stop left unread when its drain ran out
+    unpublished_at_stop: int = 0  # buffered samples a stop left unpublished when its drain ran out
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -169,6 +170,7 @@ class ReceiverStats:
             "gaps": len(self.gaps),
             "missing_samples": sum(g.count for g in self.gaps),
             "unread_at_stop": self.unread_at_stop,
+            "unpublished_at_stop": self.unpublished_at_stop,
             "clock_jumps": len(self.clock_jumps),
             "reconnects": self.reconnects,
             "last_timestamp": self.last_timestamp,
@@ -209,6 +211,7 @@ class PhysioReceiver:
         self._threads: list[threading.Thread] = []
         self._fatal: BaseException | None = None
         self._finished = threading.Event()
+        self._abandon = threading.Event()  # a stop whose drain ran out: the consumer leaves at once
         self._lock = threading.Lock()
         # Rejected chunks, overflows and NaN/inf can repeat many times a second: one line per kind
         # every 5 s, each counted.
@@ -381,9 +384,7 @@ class PhysioReceiver:
                 t.join(timeout + self._drain_budget())
         if self.buffer is not None:
             self.buffer.close()
-        for t in self._threads:
-            t.join(timeout)
-        self._publish_rest()
+        self._join_consumer(timeout)
         if self._writer is not None:
             self._writer.close()
             self._writer = None
@@ -391,6 +392,28 @@ class PhysioReceiver:
         self.sink.close()
         self.stats.connected = False
         self.log.info(f"stopped: {self.status()}")
+
+    def _join_consumer(self, timeout: float) -> None:
+        """Let the consumer publish what the buffer holds, then publish its rest, from one thread only
+        (publishing the rest beside a consumer still at work would reorder samples).
+
+        The wait scales with the frames buffered (``drain_timeout`` + ``drain_per_chunk`` each). A
+        consumer still at work after that (a big backlog on a busy machine) is told to leave after its
+        current frame, and the rest goes out as one frame. Only a consumer stuck in the output leaves
+        samples unpublished: counted (``unpublished_at_stop``) and said as an error."""
+        consumer = next((t for t in self._threads if t.name == "receiver-consumer"), None)
+        if consumer is not None and consumer.is_alive():
+            frames = self.buffer.unread // max(1, self.config.output_frame) if self.buffer is not None else 0
+            consumer.join(timeout + self.config.drain_timeout + self.config.drain_per_chunk * frames)
+            if consumer.is_alive():
+                self._abandon.set()
+                consumer.join(timeout)
+        if consumer is not None and consumer.is_alive():
+            self.stats.unpublished_at_stop = self.buffer.unread if self.buffer is not None else 0
+            self.log.error(f"stopping: the output is stuck: {self.stats.unpublished_at_stop} buffered "
+                           f"sample(s) not published")
+            return
+        self._publish_rest()
 
     # -- producer ------------------------------------------------------------
     def _produce(self) -> None:
@@ -421,13 +444,6 @@ class PhysioReceiver:
         deadline = self._monotonic() + budget
         taken = 0
         while True:
-            if self._monotonic() >= deadline:
-                left = self.source.backlog()
-                self.log.error(f"stopping: {self.source.uri} still delivered after {budget:g} s of "
-                               f"taking what had arrived ({taken} sample(s) taken, about {left} chunk(s) "
-                               f"left unread; drain_timeout {self.config.drain_timeout:g} s)")
-                self.stats.unread_at_stop = left
-                break
             try:
                 chunk = self.source.receive(timeout=0.0)
             except StreamerError:
@@ -436,6 +452,13 @@ class PhysioReceiver:
                 break
             self._accept(chunk)
             taken += chunk.num_samples
+            if self._monotonic() >= deadline:
+                left = self.source.backlog()
+                self.log.error(f"stopping: {self.source.uri} still delivered after {budget:g} s of "
+                               f"taking what had arrived ({taken} sample(s) taken, about {left} chunk(s) "
+                               f"left unread; drain_timeout {self.config.drain_timeout:g} s)")
+                self.stats.unread_at_stop = left
+                break
         if taken:
             self.log.info(f"stopping: took the {taken} sample(s) that had already arrived")
 
@@ -567,6 +590,8 @@ class PhysioReceiver:
         cfg = self.config
         while True:
             self._resume.wait()
+            if self._abandon.is_set():
+                return  # a stop ran out of time for frame after frame: it publishes the rest at once
             frame = self.buffer.dequeue_frame(cfg.output_frame, cfg.sample_overlap, timeout=0.1)
             if frame is None:
                 if self.buffer.closed:

@@ -740,3 +740,64 @@ def test_the_stops_drain_time_scales_with_what_the_input_holds(
     else:
         assert len(errors) == 1 and "chunk(s) left unread" in errors[0], errors
         assert len(published) < 5000 and rx.status()["unread_at_stop"] == src.held > 0
+
+
+def test_a_backlog_the_stop_cannot_wait_for_goes_out_whole_and_in_order() -> None:
+    """A slow output (10 ms a frame) and 1500 buffered frames at the stop, with no time allowed for
+    them: the consumer leaves after its current frame and the stop publishes the rest as one frame.
+    Every sample is published once, in order (the rest used to go out beside a consumer still at work,
+    reordering them)."""
+    rx, src, sink = make(sampling_rate=100, output_frame=1, drain_timeout=0, drain_per_chunk=0,
+                         buffer_length=5000)
+    sink.delay = 0.01
+    for i in range(0, 1500, 100):
+        src.chunks.put(chunk(i, 100))
+    rx.start()
+    wait_until(lambda: rx.status()["received_samples"] == 1500, 10, "the producer to take the input")
+    rx.stop(timeout=0.05)
+    published = np.concatenate([f.values[:, 0] for f in sink.frames])
+    np.testing.assert_array_equal(published, np.arange(1500))
+    assert rx.status()["unpublished_at_stop"] == 0 and len(sink.frames) < 1500  # the rest went as one
+
+
+class StuckSink(MemorySink):
+    """An output whose 10th publish does not return until ``release`` is set."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.stuck, self.release = threading.Event(), threading.Event()
+
+    def publish(self, frame: Frame) -> None:
+        if len(self.frames) == 10 and not self.release.is_set():
+            self.stuck.set()
+            self.release.wait(30)
+        super().publish(frame)
+
+
+def test_a_stop_never_publishes_beside_a_consumer_stuck_in_the_output(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """The consumer is stuck inside its 11th publish when the stop comes. The stop must not publish the
+    rest meanwhile (that frame would land after the rest: samples out of order); it says how many
+    samples it left, as an error, and what was published is in order."""
+    cfg = ReceiverConfig.from_mapping({"input": "mem:source", "output": "mem:sink", "sampling_rate": 100,
+                                       "output_frame": 1, "drain_timeout": 0, "drain_per_chunk": 0,
+                                       "buffer_length": 5000})
+    src = MemorySource(StreamSpec("src", nominal_rate=100.0))
+    sink = StuckSink()
+    rx = PhysioReceiver(cfg, src, sink, log=logging.getLogger("test"))
+    for i in range(0, 500, 100):
+        src.chunks.put(chunk(i, 100))
+    rx.start()
+    assert sink.stuck.wait(10)
+    wait_until(lambda: rx.status()["received_samples"] == 500, 10, "the producer to take the input")
+    with caplog.at_level(logging.ERROR, logger="test"):
+        rx.stop(timeout=0.05)
+    sink.release.set()
+    consumer = next(t for t in rx._threads if t.name == "receiver-consumer")
+    consumer.join(10)
+    assert not consumer.is_alive()  # it left after the frame it was stuck in
+    published = np.concatenate([f.values[:, 0] for f in sink.frames])
+    np.testing.assert_array_equal(published, np.arange(len(published)))  # in order, none twice
+    left = rx.status()["unpublished_at_stop"]
+    assert len(published) + left == 500 and left > 0
+    assert [m for m in log_lines(caplog, "the output is stuck") if f"{left} buffered sample(s)" in m]

@@ -203,7 +203,12 @@ def check_every_strap_sample_in_the_bag(bag: Path) -> dict[str, list]:
     for topic, rate in RECEIVERS.values():
         stamps = np.concatenate(messages[topic])
         assert len(stamps) > 100 * rate, (topic, len(stamps))  # minutes of the strap, not a trickle
-        assert check_counter(stamps, rate, []) == 0, topic
+        try:
+            assert check_counter(stamps, rate, []) == 0
+        except AssertionError as exc:
+            summary = json.loads((bag.parent / "summary.json").read_text())
+            raise AssertionError(f"{topic}: {exc}\nreceivers: {summary['session'].get('receivers')}\n"
+                                 f"restarts: {summary.get('restarts')}") from None
     return messages
 
 
