@@ -222,9 +222,13 @@ def plan_session(options: SessionConfig, folder: SessionFolder, device_id: str,
         # which the processor's and the recorder's subscriptions take with ease on a loaded machine.
         ecg_frame = max(13, round(13 * options.speed))
         streams.append((ECG_RECEIVER, "ECG", topics.POLAR_H10_ECG, ecg_frame, 130.0, watched + 1 + record))
+    # In a lab the strap's samples come from the sensor host's LSL clock: the station's receivers add
+    # LSL's time correction (the offset of that clock from the station's, measured by liblsl) to them.
+    sync = "?sync=1" if options.lab else ""
     for name, stream, topic, frame, rate, listeners in streams:
         values: dict[str, Any] = {
-            "input": f"lsl:PolarH10/{device_id}/{stream}", "output": f"ros:{topic}", "output_frame": frame,
+            "input": f"lsl:PolarH10/{device_id}/{stream}{sync}", "output": f"ros:{topic}",
+            "output_frame": frame,
             "sampling_rate": rate, "resolve_timeout": options.startup_timeout,
             "wait_for_consumers": options.startup_timeout, "min_consumers": listeners,
         }

@@ -372,6 +372,8 @@ class LabRun:
     hosts: HostWatch | None = None
     outages: list[dict[str, Any]] = field(default_factory=list)
     wall_offsets: dict[str, float] = field(default_factory=dict)
+    #: Per receiver: the LSL time correction it applied to the strap's samples (its last status).
+    lsl_corrections: dict[str, Any] = field(default_factory=dict)
 
     def summary(self) -> dict[str, Any]:
         lab = self.lab
@@ -383,8 +385,12 @@ class LabRun:
             "clock_offsets": {
                 "ros": "every ROS node of the lab runs on this station's /clock (use_sim_time): the "
                        "session's time is the same on every host whatever their wall clocks say",
-                "lsl": "a simulated strap stamps its samples on that clock too; a real strap stamps them on "
-                       "the sensor host's LSL clock",
+                "lsl": "the strap's samples are stamped on the sensor host's LSL clock (a simulated strap's "
+                       "follow the session's clock); the station's receivers add LSL's time correction "
+                       "(liblsl clocksync: the measured offset of that clock from the station's) to each",
+                # Per receiver: the correction applied (offset_s: the last; min_s, max_s, span_s: how it
+                # moved over the session), from its last status.
+                "lsl_time_correction": self.lsl_corrections,
                 # Receive time here minus send time there, smallest over the heartbeats: the wall-clock
                 # offset plus the one-way delay, so an upper bound of the offset.
                 "wall_offset_upper_bound_s": {role: round(v, 4) for role, v in self.wall_offsets.items()},
@@ -571,6 +577,10 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
             lab.hosts, lab.outages = hosts, hosts.outages if hosts is not None else []
             lab.wall_offsets = dict(watcher.wall_offsets)
         out.node_codes = group.stop()
+        if lab is not None:  # the receivers' last statuses (published as they stopped) hold their corrections
+            with watcher.lock:
+                lab.lsl_corrections = {name: (view.receivers.get(name) or {}).get("clock_correction")
+                                       for name in receivers}
         out.stop_seconds = dict(group.stop_seconds)
         supervision.report()
         watcher.close()
