@@ -87,7 +87,8 @@ _HOST = re.compile(r"^(?:[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?)(?:\.[A-Z
 
 
 def parse_live(value: str) -> tuple[str, int]:
-    """``[HOST:]PORT`` (``PORT`` alone: on 127.0.0.1) -> (host, port); ValueError says what is wrong."""
+    """``[HOST:]PORT`` (``PORT`` alone: on 127.0.0.1) -> (host, port); ValueError says what is expected
+    (the configuration model adds the value given)."""
     text = value.strip()
     host, sep, port_text = text.rpartition(":")
     if not sep:
@@ -95,10 +96,9 @@ def parse_live(value: str) -> tuple[str, int]:
     elif host.startswith("[") and host.endswith("]"):
         host = host[1:-1]  # [::1]:8765
     if not host or not (_HOST.match(host) or ":" in host):
-        raise ValueError(f"expected [HOST:]PORT, e.g. {DEFAULT_LIVE} or 8765 (got {value!r})")
+        raise ValueError(f"expected [HOST:]PORT, e.g. {DEFAULT_LIVE} or 8765")
     if not port_text.isdigit() or not 1 <= int(port_text) <= 65535:
-        raise ValueError(f"expected [HOST:]PORT with a port from 1 to 65535, e.g. {DEFAULT_LIVE} "
-                         f"(got {value!r})")
+        raise ValueError(f"expected [HOST:]PORT with a port from 1 to 65535, e.g. {DEFAULT_LIVE}")
     return host, int(port_text)
 
 

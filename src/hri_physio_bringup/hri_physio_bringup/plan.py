@@ -32,6 +32,7 @@ from hri_physio_bridge.polar.devices import device_id_of
 from hri_physio_bridge.receiver import ReceiverConfig
 from hri_physio_bringup.clock import CLOCK_STEP
 from hri_physio_bringup.folder import SessionFolder
+from hri_physio_bringup.live import LIVE_NODE, LiveViewConfig
 from hri_physio_bringup.options import SessionConfig
 from hri_physio_coach.coach import CoachError, ExerciseCoach
 from hri_physio_coach.config import COACH_NODE, CoachNodeConfig
@@ -51,10 +52,11 @@ RECORDER, MOCK, CONTROLLER = "physio_recorder", "mock_qt_robot", "qt_controller"
 HR_RECEIVER, ECG_RECEIVER, PROCESSOR = "hr_receiver", "ecg_receiver", "neurokit_processor"
 PARTICIPANT, COACH = PARTICIPANT_NODE, COACH_NODE
 AUDIO, VIDEO, POLAR_STREAMER = "audio_streamer", "video_streamer", "polar_streamer"
+LIVE = LIVE_NODE
 #: Which part of a lab (``--role``) runs each node.
-ROLE_OF = {RECORDER: "station", MOCK: "robot", CONTROLLER: "robot", AUDIO: "robot", VIDEO: "robot",
-           PARTICIPANT: "sensor", POLAR_STREAMER: "sensor", HR_RECEIVER: "station", ECG_RECEIVER: "station",
-           PROCESSOR: "station", COACH: "station"}
+ROLE_OF = {RECORDER: "station", LIVE: "station", MOCK: "robot", CONTROLLER: "robot", AUDIO: "robot",
+           VIDEO: "robot", PARTICIPANT: "sensor", POLAR_STREAMER: "sensor", HR_RECEIVER: "station",
+           ECG_RECEIVER: "station", PROCESSOR: "station", COACH: "station"}
 #: Frames the audio streamer renders at once on the null sink: at 30x sim time, ~320 blocks per wall second.
 NULL_SINK_BLOCK = 4096
 
@@ -204,6 +206,13 @@ def plan_session(options: SessionConfig, folder: SessionFolder, device_id: str,
         nodes.append(NodeLaunch(RECORDER, "physio_recorder", RECORDER, _validated(RecorderConfig, RECORDER, {
             "output": str(folder.bag), "session_id": coach.participant,
             "discovery_period": 0.2, "status_period": 10.0})))
+    live = options.live_address
+    if live is not None:
+        # The live view on the session's clock; started before the receivers, which wait for it too.
+        host, port = live
+        nodes.append(NodeLaunch(LIVE, "live_view", LIVE, _validated(LiveViewConfig, LIVE, {
+            "host": host, "port": port, "name": f"HRI Physio session {coach.participant}"}),
+            ("--ros-args", *SIM_TIME)))
     nodes.append(NodeLaunch(MOCK, "mock_qt_robot", MOCK, _validated(MockQtRobotConfig, MOCK, {
         "joint_state_rate": round(1 / CLOCK_STEP, 3), "mirror_media": False}), ("--ros-args", *SIM_TIME)))
     nodes.append(NodeLaunch(CONTROLLER, "qt_controller", CONTROLLER,
@@ -214,7 +223,8 @@ def plan_session(options: SessionConfig, folder: SessionFolder, device_id: str,
     # coach (or processor) get every sample from the first - also after a restart: HR goes to the
     # launcher's watcher, the recorder and (strap source) the coach; ECG to the processor and the
     # recorder; and each output to the launcher's supervision (where a restarted receiver's gap ends).
-    watched = 1
+    # The live view subscribes to both outputs as well.
+    watched = 1 + (live is not None)
     streams = [(HR_RECEIVER, "HR", topics.POLAR_H10_HR, 1, 1.0,
                 watched + 1 + record + (options.hr_source == "strap"))]
     if not options.no_ecg:

@@ -38,6 +38,7 @@ import json
 import math
 import os
 import signal
+import socket
 import sys
 import threading
 import time
@@ -73,6 +74,7 @@ from hri_physio_bringup.isolation import (
     parse_domain,
 )
 from hri_physio_bringup.lab import Lab, LabError, describe, load_lab, lsl_config, ros_environment
+from hri_physio_bringup.live import DEFAULT_LIVE
 from hri_physio_bringup.options import PROG, SessionConfig
 from hri_physio_bringup.plan import (
     COACH,
@@ -332,11 +334,26 @@ def build_parser() -> argparse.ArgumentParser:
         "hri_physio_session --lab lab.yaml --role sensor|robot|station (config/lab.example.yaml; "
         "docs/ARCHITECTURE.md, \"Running a lab\").",
     )
-    add_config_arguments(p, SessionConfig)
+    add_config_arguments(p, SessionConfig, skip=("live",))
     for group in p._action_groups:  # the launcher's options are not ROS parameters
         if group.title and group.title.startswith("options (also"):
             group.title = "session options"
+            # --live alone serves on the default address: a flag with an optional value.
+            group.add_argument("--live", dest="live", nargs="?", const=DEFAULT_LIVE, default=None,
+                               metavar="[HOST:]PORT", help=SessionConfig.help_text("live"))
     return p
+
+
+def check_live_port(address: tuple[str, int]) -> None:
+    """The live view's address must be free on this host: said before anything starts (ConfigError)."""
+    host, port = address
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind((host, port))
+        except OSError as exc:
+            raise ConfigError(f"live: cannot serve on {host}:{port}: {exc.strerror or exc}") from None
 
 
 @dataclass
@@ -689,6 +706,8 @@ def main(argv: list[str] | None = None) -> int:
             f"{coach.participant}_{options.role}")
         # Every node's configuration, checked before anything starts (on the folder it would get).
         plan_session(options, SessionFolder.plan(options.out, label, started), device, coach)
+        if options.live_address is not None and options.role in ("", "station"):
+            check_live_port(options.live_address)
     except ConfigError as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr, flush=True)
         return 2
@@ -752,6 +771,12 @@ def _run(options: SessionConfig, plan: SessionPlan, folder: SessionFolder, claim
     domain = (f"ROS domain {claim.domain} (export ROS_DOMAIN_ID={claim.domain} to watch it)" if claim.chosen
               else f"ROS domain {claim.domain} (ROS_DOMAIN_ID)")
     console.say(f"[session] folder {folder.display()}; {domain}; LSL streams PolarH10/{plan.device_id}/*")
+    live = options.live_address
+    if live is not None:
+        host, port = live
+        where = "this host only" if host in ("127.0.0.1", "localhost", "::1") else "open to the network"
+        console.say(f"[session] live view on ws://{host}:{port} ({where}): in Foxglove, open a Foxglove "
+                    f"WebSocket connection to it with src/hri_physio_bringup/config/foxglove_layout.json")
     if lab is not None:
         console.say(describe(lab.lab, lab.role))
         console.say(f"[lab] waiting for the hosts: {', '.join(HostWatch(lab.lab, lab.role).waiting_for())}")
