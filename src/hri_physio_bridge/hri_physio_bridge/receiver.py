@@ -58,8 +58,9 @@ class ReceiverConfig(NodeConfig):
         "sample_overlap", "buffer_length", "log_data", "log_name",
     )
 
-    input: str = option("lsl:PolarH10/SIM0001/ECG", "source stream address: lsl:<name>[?type=&source_id=], "
-                        "ros:/<topic>, csv:<file>[?rate=]", min_length=1)
+    input: str = option("lsl:PolarH10/SIM0001/ECG", "source stream address: lsl:<name>[?type=&source_id="
+                        "&sync=1] (sync=1: LSL's time correction added to each stamp), ros:/<topic>, "
+                        "csv:<file>[?rate=]", min_length=1)
     output: str = option("ros:/physio/polar_h10/ecg", "destination stream address (same schemes)",
                          min_length=1)
     dtype: str = option("float64", "channel format: float64|float32|int64|int32|int16|int8|string "

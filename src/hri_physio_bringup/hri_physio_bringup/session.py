@@ -10,7 +10,9 @@ Starts, as separate processes (the console scripts a lab would run):
 * ``qt_controller`` + ``mock_qt_robot`` - the robot side;
 * ``audio_streamer`` + ``video_streamer`` - the music (null sink unless ``--audio-sink device``) and
   the reference videos (offscreen), on the session's clock, their status and preview in the bag;
-* ``physio_recorder`` - every topic into a rosbag2 (MCAP) directory.
+* ``physio_recorder`` - every topic into a rosbag2 (MCAP) directory;
+* ``live_view`` (with ``--live [HOST:]PORT``) - the session served live to Foxglove over its
+  WebSocket protocol, on 127.0.0.1:8765 unless told otherwise.
 
 Every node's configuration is checked before anything starts. The session gets a folder of its
 own, ``<out>/<participant id>_<date-time>/`` (bag, ``logs/<node>.log``, ``configs/<node>.yaml``,
