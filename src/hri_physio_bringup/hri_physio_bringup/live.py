@@ -6,7 +6,9 @@ channel of the same name, over Foxglove's WebSocket protocol. The messages keep 
 the bag (a frame is ``{"layout": {"dim": [...], "data_offset": 0}, "data": [t, value, ...]}``, an
 event or a state ``{"data": "<JSON text>"}``), so ``config/foxglove_layout.json``'s message paths
 (``/physio/polar_h10/hr.data[1]``) and user scripts (``JSON.parse(message.data)``) work on the live
-connection as on the bag. They are JSON with a JSON schema each (:data:`FRAME_SCHEMA`,
+connection as on the bag. A topic is subscribed to on ROS only while a viewer watches its channel
+(:class:`Demand`): with nobody connected the live view holds no subscription and costs nothing. They
+are JSON with a JSON schema each (:data:`FRAME_SCHEMA`,
 :data:`TEXT_SCHEMA`); the video preview is a ``foxglove.CompressedImage`` and the nodes' logs
 (``/rosout``) ``foxglove.Log`` (the SDK's own schemas), which Foxglove's Image and Log panels show.
 
@@ -125,6 +127,30 @@ _LOG_LEVELS = {10: 1, 20: 2, 30: 3, 40: 4, 50: 5}
 
 def log_level(ros_level: int) -> int:
     return _LOG_LEVELS.get(int(ros_level), 0)
+
+
+class Demand:
+    """Which topics viewers watch: subscriptions per topic, counted per client (a client that
+    disconnects unsubscribes from each of its channels). The node subscribes on ROS only to the topics
+    some client watches, so with no viewer it holds no subscription at all. Not thread-safe: the node
+    holds its lock around it."""
+
+    def __init__(self) -> None:
+        self._clients: dict[str, set[int]] = {}
+
+    def subscribe(self, topic: str, client: int) -> None:
+        self._clients.setdefault(topic, set()).add(client)
+
+    def unsubscribe(self, topic: str, client: int) -> None:
+        self._clients.get(topic, set()).discard(client)
+
+    def watched(self) -> set[str]:
+        return {topic for topic, clients in self._clients.items() if clients}
+
+    def changes(self, subscribed: set[str]) -> tuple[set[str], set[str]]:
+        """(topics to subscribe to, topics to drop) given the ROS subscriptions held now."""
+        watched = self.watched()
+        return watched - subscribed, subscribed - watched
 
 
 class LiveViewConfig(NodeConfig):

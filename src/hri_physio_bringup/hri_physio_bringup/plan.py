@@ -208,11 +208,12 @@ def plan_session(options: SessionConfig, folder: SessionFolder, device_id: str,
             "discovery_period": 0.2, "status_period": 10.0})))
     live = options.live_address
     if live is not None:
-        # The live view on the session's clock; started before the receivers, which wait for it too.
+        # The live view subscribes to a topic only while a viewer watches it, so nothing waits for it (a
+        # viewer sees the session from when it connects) and it costs nothing unwatched. On wall time:
+        # under sim time it would take every /clock message (hundreds a second at 30x) for nobody.
         host, port = live
         nodes.append(NodeLaunch(LIVE, "live_view", LIVE, _validated(LiveViewConfig, LIVE, {
-            "host": host, "port": port, "name": f"HRI Physio session {coach.participant}"}),
-            ("--ros-args", *SIM_TIME)))
+            "host": host, "port": port, "name": f"HRI Physio session {coach.participant}"})))
     nodes.append(NodeLaunch(MOCK, "mock_qt_robot", MOCK, _validated(MockQtRobotConfig, MOCK, {
         "joint_state_rate": round(1 / CLOCK_STEP, 3), "mirror_media": False}), ("--ros-args", *SIM_TIME)))
     nodes.append(NodeLaunch(CONTROLLER, "qt_controller", CONTROLLER,
@@ -223,8 +224,7 @@ def plan_session(options: SessionConfig, folder: SessionFolder, device_id: str,
     # coach (or processor) get every sample from the first - also after a restart: HR goes to the
     # launcher's watcher, the recorder and (strap source) the coach; ECG to the processor and the
     # recorder; and each output to the launcher's supervision (where a restarted receiver's gap ends).
-    # The live view subscribes to both outputs as well.
-    watched = 1 + (live is not None)
+    watched = 1
     streams = [(HR_RECEIVER, "HR", topics.POLAR_H10_HR, 1, 1.0,
                 watched + 1 + record + (options.hr_source == "strap"))]
     if not options.no_ecg:

@@ -1,5 +1,8 @@
 """live_view: the session's topics served to Foxglove over its WebSocket protocol, checked as a client.
 
+The live view subscribes on ROS only to what a viewer watches: the client's subscriptions bring the
+data, its leaving takes the subscriptions away.
+
 One live_view process, fed by this test's own ROS publishers (no session: the session-level check is in
 test_session.py); a WebSocket client connects, reads the advertised channels and schemas, subscribes and
 decodes what comes.
@@ -16,7 +19,7 @@ import numpy as np
 import psutil
 import pytest
 
-from helpers import NodeProcess
+from helpers import NodeProcess, wait_until
 from helpers.foxglove_ws import check_against_schema, watch
 from hri_physio_bridge import topics
 from hri_physio_bridge.frames import Frame
@@ -68,6 +71,10 @@ def test_a_client_subscribes_and_decodes_heart_rate_with_the_advertised_schema(r
             publisher.start()
             seen = watch(f"ws://127.0.0.1:{port}", {topics.POLAR_H10_HR: 10, topics.COACH_STATE: 1,
                                                     topics.VIDEO_PREVIEW: 1}, timeout=90)
+            # The client has gone: the live view drops its subscriptions (no viewer, no cost).
+            wait_until(lambda: hr_pub.get_subscription_count() + state_pub.get_subscription_count() == 0,
+                       60, "the live view to unsubscribe once its viewer left")
+            live.wait_for_output("viewers watch 0 of", timeout=60)
         finally:
             stop.set()
         code = live.stop()

@@ -16,6 +16,7 @@ from hri_physio_bringup.live import (
     FRAME_SCHEMA,
     LIVE_TOPICS,
     TEXT_SCHEMA,
+    Demand,
     LiveViewConfig,
     frame_message,
     log_level,
@@ -92,14 +93,15 @@ def test_a_session_with_live_runs_the_live_view_on_the_station(tmp_path: Path) -
     assert LIVE not in [n.name for n in off.nodes]
     on = plan_of(tmp_path, live="127.0.0.1:9123")
     names = [n.name for n in on.nodes]
-    assert names.index(RECORDER) < names.index(LIVE) < names.index(HR_RECEIVER)  # listening before data
+    assert names.index(RECORDER) < names.index(LIVE) < names.index(HR_RECEIVER)
     live = on.node(LIVE)
     assert (live.script, live.config.host, live.config.port) == ("live_view", "127.0.0.1", 9123)
-    assert "use_sim_time:=true" in live.extra  # messages logged at the session's time
+    # Not on sim time: it would take every /clock message, watched or not (logged at wall time).
+    assert "use_sim_time:=true" not in live.extra
     assert ROLE_OF[LIVE] == "station" and LIVE in RESTARTABLE
-    # The receivers hold their first samples until the live view listens too (it subscribes to both).
+    # Nothing waits for it: it listens only while a viewer watches (the receivers' listeners are as without).
     for receiver in (HR_RECEIVER, ECG_RECEIVER):
-        assert on.node(receiver).config.min_consumers == off.node(receiver).config.min_consumers + 1
+        assert on.node(receiver).config.min_consumers == off.node(receiver).config.min_consumers
 
 
 def test_messages_keep_the_bags_shape_and_json_has_no_nan() -> None:
@@ -112,3 +114,19 @@ def test_messages_keep_the_bags_shape_and_json_has_no_nan() -> None:
     assert text_message('{"t": 1}') == {"data": '{"t": 1}'} and TEXT_SCHEMA["required"] == ["data"]
     assert [log_level(level) for level in (10, 20, 30, 40, 50, 7)] == [1, 2, 3, 4, 5, 0]
     assert all(topic.startswith("/") for topic in LIVE_TOPICS)
+
+
+def test_topics_are_subscribed_to_while_a_viewer_watches_them() -> None:
+    demand = Demand()
+    assert demand.changes(set()) == (set(), set())  # no viewer: no subscription
+    demand.subscribe("/coach/state", client=1)
+    demand.subscribe("/coach/state", client=2)
+    demand.subscribe("/physio/polar_h10/hr", client=2)
+    assert demand.changes(set()) == ({"/coach/state", "/physio/polar_h10/hr"}, set())
+    held = {"/coach/state", "/physio/polar_h10/hr"}
+    demand.unsubscribe("/coach/state", client=1)  # the other client still watches it
+    demand.unsubscribe("/physio/polar_h10/hr", client=2)
+    assert demand.changes(held) == (set(), {"/physio/polar_h10/hr"})
+    demand.unsubscribe("/coach/state", client=2)
+    demand.unsubscribe("/coach/state", client=3)  # a client that never subscribed: nothing
+    assert demand.changes({"/coach/state"}) == (set(), {"/coach/state"})

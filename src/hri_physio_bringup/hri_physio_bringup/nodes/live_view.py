@@ -6,10 +6,12 @@ Examples::
     live_view --host 0.0.0.0 --port 8765       # every interface: anyone reaching the port sees the data
     hri_physio_session --live                  # what the session starts on the station
 
-Each topic of :data:`hri_physio_bringup.live.LIVE_TOPICS` is subscribed to as raw (serialized) messages
-and logged on a Foxglove channel of the same name; a message is deserialized and converted only when a
-client subscribes to its channel, so with no viewer connected the node costs a callback per message and
-nothing else. Messages are logged at the node's clock (the session's /clock under ``use_sim_time``).
+Each topic of :data:`hri_physio_bringup.live.LIVE_TOPICS` has a Foxglove channel of the same name; the
+topic is subscribed to on ROS (raw, serialized messages, converted here) only while a client watches
+its channel, so with no viewer connected the node holds no subscription and costs nothing. Messages are
+logged at the station's wall clock as they arrive (the session's time is in each message: an event's
+``t``, a frame's sample stamps). Not on ``use_sim_time``: that would subscribe it to ``/clock``, hundreds
+of messages a second at 30x, watched or not.
 """
 
 from __future__ import annotations
@@ -39,14 +41,13 @@ from hri_physio_bringup.live import (
     LOG,
     TEXT,
     TEXT_SCHEMA,
+    Demand,
     LiveViewConfig,
     frame_message,
     log_level,
     text_message,
 )
 
-#: Topics whose last message a new viewer gets at once (the publishers latch them: transient local).
-LATCHED = frozenset({topics.COACH_STATE})
 _MSG_TYPES = {FRAME: Float64MultiArray, TEXT: String, IMAGE: RosCompressedImage, LOG: RosLog}
 #: foxglove.Log levels by number (live.log_level's).
 _LEVELS = (LogLevel.Unknown, LogLevel.Debug, LogLevel.Info, LogLevel.Warning, LogLevel.Error, LogLevel.Fatal)
@@ -69,27 +70,30 @@ def _qos(topic: str, kind: str) -> Any:
 
 
 class LiveViewNode(ManagedNode):
-    """ROS 2 shell: the session's topics in, Foxglove channels out (WebSocket server)."""
+    """ROS 2 shell: the session's topics in, Foxglove channels out (WebSocket server).
+
+    A topic is subscribed to on ROS while some viewer watches its channel (:class:`Demand`): the
+    server's subscribe and unsubscribe callbacks (on the SDK's thread) update the demand and trigger a
+    guard condition, and the executor's thread subscribes or unsubscribes. A latched topic (the coach's
+    state) is subscribed to transient-local: a new viewer gets its last message at once.
+    """
 
     def __init__(self, config: LiveViewConfig, **kwargs: Any) -> None:
         super().__init__(LIVE_NODE, **kwargs)
         self.config = cfg = self.declare_config(config)
-        self._lock = threading.Lock()  # the executor may run callbacks on more than one thread
+        self._lock = threading.Lock()
         self.sent = 0
-        self.channels: dict[str, Any] = {}
+        self._demand = Demand()
+        self._watching: dict[str, Any] = {}
+        self._changed = self.create_guard_condition(self._apply_demand)
+        self.channels: dict[str, Any] = {topic: self._channel(topic, kind)
+                                         for topic, kind in LIVE_TOPICS.items()}
         self.server: Any = None
-        #: The last message of each latched topic (serialized), sent again to a client that subscribes.
-        self._latched: dict[str, bytes] = {}
-        self._converters: dict[str, Callable[[bytes], Any]] = {}
         try:
             self.server = foxglove.start_server(name=cfg.name, host=cfg.host, port=cfg.port,
                                                 server_listener=_Listener(self))
         except Exception as exc:  # the SDK raises its own error types for a taken port or a bad address
             raise LiveViewError(f"cannot serve on {cfg.host}:{cfg.port}: {exc}") from None
-        for topic, kind in LIVE_TOPICS.items():
-            self.channels[topic] = self._channel(topic, kind)
-            self.create_subscription(_MSG_TYPES[kind], topic, self._forward(topic, kind), _qos(topic, kind),
-                                     raw=True)
         self.get_logger().info(
             f"serving the session live on ws://{cfg.host}:{self.server.port} (Foxglove: open connection, "
             f"Foxglove WebSocket; layout src/hri_physio_bringup/config/foxglove_layout.json): "
@@ -105,36 +109,43 @@ class LiveViewNode(ManagedNode):
             return CompressedImageChannel(topic)
         return LogChannel(topic)
 
+    # -- viewers (the SDK's thread) --------------------------------------------------------------
+    def viewer_subscribed(self, topic: str, client: int) -> None:
+        with self._lock:
+            self._demand.subscribe(topic, client)
+        self._changed.trigger()
+
+    def viewer_unsubscribed(self, topic: str, client: int) -> None:
+        with self._lock:
+            self._demand.unsubscribe(topic, client)
+        self._changed.trigger()
+
+    # -- ROS (the executor's thread) -------------------------------------------------------------
+    def _apply_demand(self) -> None:
+        with self._lock:
+            add, drop = self._demand.changes(set(self._watching))
+        for topic in sorted(drop):
+            self.destroy_subscription(self._watching.pop(topic))
+        for topic in sorted(add):
+            kind = LIVE_TOPICS[topic]
+            self._watching[topic] = self.create_subscription(
+                _MSG_TYPES[kind], topic, self._forward(topic, kind), _qos(topic, kind), raw=True)
+        if add or drop:
+            self.get_logger().info(f"viewers watch {len(self._watching)} of {len(self.channels)} topics"
+                                   + (f" (+{', '.join(sorted(add))})" if add else ""))
+
     def _now_ns(self) -> int:
         return int(self.get_clock().now().nanoseconds)
 
     def _forward(self, topic: str, kind: str) -> Callable[[bytes], None]:
         channel, msg_type = self.channels[topic], _MSG_TYPES[kind]
         convert = {FRAME: _frame, TEXT: _text, IMAGE: _image, LOG: _log}[kind]
-        latched = topic in LATCHED
-
-        def send(raw: bytes) -> None:
-            channel.log(convert(deserialize_message(raw, msg_type)), log_time=self._now_ns())
-            with self._lock:
-                self.sent += 1
 
         def callback(raw: bytes) -> None:
-            if latched:
-                with self._lock:
-                    self._latched[topic] = raw
-            if channel.has_sinks():  # nobody watches this channel: nothing to convert
-                send(raw)
+            channel.log(convert(deserialize_message(raw, msg_type)), log_time=self._now_ns())
+            self.sent += 1  # the executor's thread only
 
-        self._converters[topic] = send
         return callback
-
-    def on_subscribe(self, topic: str) -> None:
-        """A client subscribed to ``topic``: a latched topic's last message goes out at once (to every
-        client on it: a state is a snapshot, twice is harmless)."""
-        with self._lock:
-            raw = self._latched.get(topic)
-        if raw is not None:
-            self._converters[topic](raw)
 
     def run(self, stop: threading.Event) -> int:
         stop.wait()
@@ -150,13 +161,16 @@ class LiveViewNode(ManagedNode):
 
 
 class _Listener:
-    """The server's callbacks (foxglove.websocket.ServerListener): subscriptions, on the SDK's thread."""
+    """The server's callbacks (foxglove.websocket.ServerListener), on the SDK's thread."""
 
     def __init__(self, node: LiveViewNode) -> None:
         self.node = node
 
     def on_subscribe(self, client: Any, channel: Any) -> None:
-        self.node.on_subscribe(channel.topic)
+        self.node.viewer_subscribed(channel.topic, client.id)
+
+    def on_unsubscribe(self, client: Any, channel: Any) -> None:
+        self.node.viewer_unsubscribed(channel.topic, client.id)
 
 
 def _frame(msg: Float64MultiArray) -> dict:
