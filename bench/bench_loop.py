@@ -22,6 +22,9 @@ commit REF (``git archive`` into a temporary folder, put first on PYTHONPATH; th
 and the installed environment are the same), then on the working tree. ``--save FILE`` writes
 the figures as JSON; ``--baseline FILE`` prints a saved run next to this one instead.
 ``--demo`` also runs the 23-minute session at the default 30x and reports its wall time.
+``--live idle`` runs the session with ``--live`` (the live view, ``live_view`` in the table, with no
+viewer connected); ``--live watched`` also connects a Foxglove WebSocket client that subscribes to
+every channel for the whole window (the messages and bytes it took are printed).
 
 Run:  source scripts/env.sh && python bench/bench_loop.py --baseline-ref HEAD~5
 """
@@ -200,12 +203,71 @@ def source_tree(ref: str, into: Path) -> dict[str, str]:
     return env
 
 
-def run_loop(label: str, seconds: float, settle: float, env: dict[str, str] | None = None) -> LoopResult:
+class LiveViewer:
+    """A Foxglove WebSocket client on a thread of its own: subscribes to every channel, counts what comes."""
+
+    def __init__(self, url: str) -> None:
+        self.url = url
+        self.messages = 0
+        self.bytes = 0
+        self.error: str | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="live-viewer", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        import asyncio
+
+        try:
+            asyncio.run(self._watch())
+        except Exception as exc:  # reported with the figures, not fatal to the bench
+            self.error = f"{type(exc).__name__}: {exc}"
+
+    async def _watch(self) -> None:
+        import aiohttp
+
+        async with aiohttp.ClientSession() as session, session.ws_connect(
+                self.url, protocols=("foxglove.sdk.v1", "foxglove.websocket.v1")) as ws:
+            while not self._stop.is_set():
+                try:
+                    msg = await ws.receive(timeout=0.5)
+                except TimeoutError:
+                    continue
+                if msg.type == aiohttp.WSMsgType.TEXT:
+                    data = json.loads(msg.data)
+                    if data.get("op") == "advertise":
+                        subs = [{"id": c["id"], "channelId": c["id"]} for c in data["channels"]]
+                        await ws.send_str(json.dumps({"op": "subscribe", "subscriptions": subs}))
+                elif msg.type == aiohttp.WSMsgType.BINARY:
+                    self.messages += 1
+                    self.bytes += len(msg.data)
+                else:
+                    raise RuntimeError(f"connection ended: {msg.type}")
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(5)
+
+
+def free_port() -> int:
+    import socket
+
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def run_loop(label: str, seconds: float, settle: float, env: dict[str, str] | None = None,
+             live: str = "off") -> LoopResult:
     env = dict(os.environ) if env is None else env
     device = "BENCH" + uuid.uuid4().hex[:6].upper()
     out = Path(tempfile.mkdtemp(prefix="bench_loop_"))
     cmd = [shutil.which(LAUNCHER, path=env["PATH"]) or LAUNCHER, "--speed", "1", "--out", str(out),
            "--device-id", device, "--no-report"]
+    port = free_port()
+    if live != "off":
+        cmd += ["--live", f"127.0.0.1:{port}"]
+    viewer: LiveViewer | None = None
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     ready = threading.Event()
     lines: list[str] = []
@@ -232,15 +294,22 @@ def run_loop(label: str, seconds: float, settle: float, env: dict[str, str] | No
         if not domain:
             raise RuntimeError(f"{label}: the session did not say its ROS domain:\n" + "\n".join(lines[-20:]))
         probe = LatencyProbe(device, "/physio/polar_h10/hr", domain[0])
+        if live == "watched":
+            viewer = LiveViewer(f"ws://127.0.0.1:{port}")
         time.sleep(settle)
         pids = {proc.pid: LAUNCHER, **{p: node_name(p) for p in descendants(proc.pid)}}
         start = {pid: cpu_seconds(pid) for pid in pids}
         with probe._lock:
             probe.measuring = True
         wall0 = time.monotonic()
+        taken0 = (viewer.messages, viewer.bytes) if viewer is not None else (0, 0)
         time.sleep(seconds)
         end = {pid: cpu_seconds(pid) for pid in pids}
         wall = time.monotonic() - wall0
+        if viewer is not None:
+            print(f"{label}: the live viewer took {viewer.messages - taken0[0]} messages, "
+                  f"{(viewer.bytes - taken0[1]) / 1e6:.2f} MB in the window"
+                  + (f" (then: {viewer.error})" if viewer.error else ""), flush=True)
         with probe._lock:
             probe.stop_lsl = True  # samples taken from now on are not counted
         for pid, name in pids.items():
@@ -253,6 +322,8 @@ def run_loop(label: str, seconds: float, settle: float, env: dict[str, str] | No
         time.sleep(2.0)
         result.latency_ms = [x * 1e3 for x in probe.latencies()]
     finally:
+        if viewer is not None:
+            viewer.close()
         if proc.poll() is None:
             proc.send_signal(signal.SIGINT)
             try:
@@ -338,6 +409,9 @@ def main() -> None:
                         help="also run the sources of git commit REF first, and print both side by side")
     parser.add_argument("--baseline", metavar="FILE", help="a run saved with --save, printed side by side")
     parser.add_argument("--save", metavar="FILE", help="write this run's figures as JSON")
+    parser.add_argument("--live", choices=("off", "idle", "watched"), default="off",
+                        help="run the session with its live view: no viewer (idle) or a client subscribed "
+                        "to every channel (watched); live_view's CPU is in the table")
     parser.add_argument("--demo", action="store_true",
                         help="also time the 23-minute session at 30x (with --baseline-ref: both)")
     args = parser.parse_args()
@@ -351,11 +425,11 @@ def main() -> None:
         with tempfile.TemporaryDirectory(prefix="bench_loop_src_") as tmp:
             env = source_tree(args.baseline_ref, Path(tmp))
             print(f"baseline: {args.baseline_ref} ({LAUNCHER} --speed 1, {args.seconds:g} s)", flush=True)
-            base = run_loop(args.baseline_ref, args.seconds, args.settle, env)
+            base = run_loop(args.baseline_ref, args.seconds, args.settle, env, live=args.live)
             if args.demo:
                 base.demo_wall_s = run_demo(env)
     print(f"now: the working tree ({LAUNCHER} --speed 1, {args.seconds:g} s)", flush=True)
-    now = run_loop("now", args.seconds, args.settle)
+    now = run_loop("now", args.seconds, args.settle, live=args.live)
     if args.demo:
         now.demo_wall_s = run_demo()
     if args.save:

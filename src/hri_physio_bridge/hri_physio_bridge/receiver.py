@@ -41,7 +41,7 @@ from hri_physio_bridge.streamers.base import (
 from hri_physio_bridge.streamers.csv_stream import CsvWriter
 from hri_physio_bridge.streamers.factory import split_uri
 from hri_physio_bridge.streamers.opener import StreamOpener
-from hri_physio_bridge.timeline import ClockJump, RateMeter, TimelineCheck
+from hri_physio_bridge.timeline import ClockJump, ClockOffsetTrack, RateMeter, TimelineCheck
 from hri_physio_bridge.waiting import Backoff, wait_for_consumers
 
 #: The measured rate may differ from sampling_rate by this share before it is warned about.
@@ -58,8 +58,9 @@ class ReceiverConfig(NodeConfig):
         "sample_overlap", "buffer_length", "log_data", "log_name",
     )
 
-    input: str = option("lsl:PolarH10/SIM0001/ECG", "source stream address: lsl:<name>[?type=&source_id=], "
-                        "ros:/<topic>, csv:<file>[?rate=]", min_length=1)
+    input: str = option("lsl:PolarH10/SIM0001/ECG", "source stream address: lsl:<name>[?type=&source_id="
+                        "&sync=1] (sync=1: LSL's time correction added to each stamp), ros:/<topic>, "
+                        "csv:<file>[?rate=]", min_length=1)
     output: str = option("ros:/physio/polar_h10/ecg", "destination stream address (same schemes)",
                          min_length=1)
     dtype: str = option("float64", "channel format: float64|float32|int64|int32|int16|int8|string "
@@ -223,6 +224,8 @@ class PhysioReceiver:
         self._rate_meter = RateMeter()
         self._next_rate_check = -math.inf
         self._source_spec: StreamSpec | None = None  # what the input declared when it first opened
+        #: The input's clock offsets (LSL time correction) as each status measured them.
+        self._offsets = ClockOffsetTrack(applied=source.corrects_clock)
 
     # -- lifecycle -----------------------------------------------------------
     def open(self) -> StreamSpec:
@@ -358,10 +361,14 @@ class PhysioReceiver:
         self._stop.set()
 
     def status(self) -> dict[str, Any]:
-        """The counters, plus the input messages the transport rejected (malformed, wrong shape)."""
+        """The counters, plus the input messages the transport rejected (malformed, wrong shape) and,
+        for an input that measures one (LSL), its clock offset (``clock_correction``, None otherwise)."""
         with self._lock:
             status = self.stats.as_dict()
         status["rejected_messages"] = self.source.bad_messages
+        self._offsets.add(self.source.clock_offset())
+        measured = self._offsets.count > 0 or self._offsets.applied
+        status["clock_correction"] = self._offsets.as_dict() if measured else None
         return status
 
     def pause(self) -> None:

@@ -149,3 +149,37 @@ class RateMeter:
         if steps.size == 0:
             return None
         return float(1.0 / np.median(steps))
+
+
+class ClockOffsetTrack:
+    """The clock offsets measured for one input (LSL's time correction, s), summed up for a status.
+
+    ``applied``: the input adds them to its timestamps (``sync=1``); otherwise they are measured only,
+    to tell how far the sender's clock is from ours. ``span_s`` (largest minus smallest) is how far the
+    correction moved during the stream: a move of a sampling period or more between two samples would
+    show as a gap or a clock jump of its own.
+    """
+
+    def __init__(self, applied: bool) -> None:
+        self.applied = applied
+        self.count = 0
+        self.first = self.last = math.nan
+        self.low, self.high = math.inf, -math.inf
+
+    def add(self, offset: float | None) -> None:
+        """One measurement (None or non-finite: none this time)."""
+        if offset is None or not math.isfinite(offset):
+            return
+        if self.count == 0:
+            self.first = offset
+        self.count += 1
+        self.last = offset
+        self.low, self.high = min(self.low, offset), max(self.high, offset)
+
+    def as_dict(self) -> dict[str, object]:
+        def seconds(value: float) -> float | None:
+            return round(value, 6) if math.isfinite(value) else None
+
+        return {"applied": self.applied, "measurements": self.count, "offset_s": seconds(self.last),
+                "first_s": seconds(self.first), "min_s": seconds(self.low), "max_s": seconds(self.high),
+                "span_s": seconds(self.high - self.low) if self.count else None}

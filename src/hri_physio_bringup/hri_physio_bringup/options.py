@@ -11,9 +11,10 @@ import re
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import model_validator
+from pydantic import field_validator, model_validator
 
 from hri_physio_bridge.config import NodeConfig, option
+from hri_physio_bringup.live import DEFAULT_LIVE, parse_live
 from hri_physio_coach.config import PolicyName
 
 PROG = "hri_physio_session"
@@ -72,6 +73,24 @@ class SessionConfig(NodeConfig):
         "", "this host's part of a lab session (with --lab): sensor (the strap side, on LSL), robot "
         "(qt_controller, the mock robot, the media streamers) or station (receivers, processor, coach, "
         "recorder and the session's clock)")
+
+    live: str = option("", f"serve the session live to Foxglove (WebSocket protocol) on [HOST:]PORT from "
+                       f"this host (the station): heart rate, zone, phase, activity, adaptations, robot "
+                       f"actions, media status, video preview; '--live' alone = {DEFAULT_LIVE}, this host "
+                       f"only; a HOST such as 0.0.0.0 opens it to the network ('' = off). Open it in "
+                       f"Foxglove with src/hri_physio_bringup/config/foxglove_layout.json")
+
+    @field_validator("live")
+    @classmethod
+    def _live(cls, value: str) -> str:
+        if value:
+            parse_live(value)
+        return value
+
+    @property
+    def live_address(self) -> tuple[str, int] | None:
+        """Where the live view serves (host, port), None when it is off."""
+        return parse_live(self.live) if self.live else None
 
     @model_validator(mode="before")
     @classmethod

@@ -32,6 +32,7 @@ from hri_physio_bridge.polar.devices import device_id_of
 from hri_physio_bridge.receiver import ReceiverConfig
 from hri_physio_bringup.clock import CLOCK_STEP
 from hri_physio_bringup.folder import SessionFolder
+from hri_physio_bringup.live import LIVE_NODE, LiveViewConfig
 from hri_physio_bringup.options import SessionConfig
 from hri_physio_coach.coach import CoachError, ExerciseCoach
 from hri_physio_coach.config import COACH_NODE, CoachNodeConfig
@@ -51,10 +52,11 @@ RECORDER, MOCK, CONTROLLER = "physio_recorder", "mock_qt_robot", "qt_controller"
 HR_RECEIVER, ECG_RECEIVER, PROCESSOR = "hr_receiver", "ecg_receiver", "neurokit_processor"
 PARTICIPANT, COACH = PARTICIPANT_NODE, COACH_NODE
 AUDIO, VIDEO, POLAR_STREAMER = "audio_streamer", "video_streamer", "polar_streamer"
+LIVE = LIVE_NODE
 #: Which part of a lab (``--role``) runs each node.
-ROLE_OF = {RECORDER: "station", MOCK: "robot", CONTROLLER: "robot", AUDIO: "robot", VIDEO: "robot",
-           PARTICIPANT: "sensor", POLAR_STREAMER: "sensor", HR_RECEIVER: "station", ECG_RECEIVER: "station",
-           PROCESSOR: "station", COACH: "station"}
+ROLE_OF = {RECORDER: "station", LIVE: "station", MOCK: "robot", CONTROLLER: "robot", AUDIO: "robot",
+           VIDEO: "robot", PARTICIPANT: "sensor", POLAR_STREAMER: "sensor", HR_RECEIVER: "station",
+           ECG_RECEIVER: "station", PROCESSOR: "station", COACH: "station"}
 #: Frames the audio streamer renders at once on the null sink: at 30x sim time, ~320 blocks per wall second.
 NULL_SINK_BLOCK = 4096
 
@@ -204,6 +206,14 @@ def plan_session(options: SessionConfig, folder: SessionFolder, device_id: str,
         nodes.append(NodeLaunch(RECORDER, "physio_recorder", RECORDER, _validated(RecorderConfig, RECORDER, {
             "output": str(folder.bag), "session_id": coach.participant,
             "discovery_period": 0.2, "status_period": 10.0})))
+    live = options.live_address
+    if live is not None:
+        # The live view subscribes to a topic only while a viewer watches it, so nothing waits for it (a
+        # viewer sees the session from when it connects) and it costs nothing unwatched. On wall time:
+        # under sim time it would take every /clock message (hundreds a second at 30x) for nobody.
+        host, port = live
+        nodes.append(NodeLaunch(LIVE, "live_view", LIVE, _validated(LiveViewConfig, LIVE, {
+            "host": host, "port": port, "name": f"HRI Physio session {coach.participant}"})))
     nodes.append(NodeLaunch(MOCK, "mock_qt_robot", MOCK, _validated(MockQtRobotConfig, MOCK, {
         "joint_state_rate": round(1 / CLOCK_STEP, 3), "mirror_media": False}), ("--ros-args", *SIM_TIME)))
     nodes.append(NodeLaunch(CONTROLLER, "qt_controller", CONTROLLER,
@@ -222,9 +232,13 @@ def plan_session(options: SessionConfig, folder: SessionFolder, device_id: str,
         # which the processor's and the recorder's subscriptions take with ease on a loaded machine.
         ecg_frame = max(13, round(13 * options.speed))
         streams.append((ECG_RECEIVER, "ECG", topics.POLAR_H10_ECG, ecg_frame, 130.0, watched + 1 + record))
+    # In a lab the strap's samples come from the sensor host's LSL clock: the station's receivers add
+    # LSL's time correction (the offset of that clock from the station's, measured by liblsl) to them.
+    sync = "?sync=1" if options.lab else ""
     for name, stream, topic, frame, rate, listeners in streams:
         values: dict[str, Any] = {
-            "input": f"lsl:PolarH10/{device_id}/{stream}", "output": f"ros:{topic}", "output_frame": frame,
+            "input": f"lsl:PolarH10/{device_id}/{stream}{sync}", "output": f"ros:{topic}",
+            "output_frame": frame,
             "sampling_rate": rate, "resolve_timeout": options.startup_timeout,
             "wait_for_consumers": options.startup_timeout, "min_consumers": listeners,
         }

@@ -10,7 +10,9 @@ Starts, as separate processes (the console scripts a lab would run):
 * ``qt_controller`` + ``mock_qt_robot`` - the robot side;
 * ``audio_streamer`` + ``video_streamer`` - the music (null sink unless ``--audio-sink device``) and
   the reference videos (offscreen), on the session's clock, their status and preview in the bag;
-* ``physio_recorder`` - every topic into a rosbag2 (MCAP) directory.
+* ``physio_recorder`` - every topic into a rosbag2 (MCAP) directory;
+* ``live_view`` (with ``--live [HOST:]PORT``) - the session served live to Foxglove over its
+  WebSocket protocol, on 127.0.0.1:8765 unless told otherwise.
 
 Every node's configuration is checked before anything starts. The session gets a folder of its
 own, ``<out>/<participant id>_<date-time>/`` (bag, ``logs/<node>.log``, ``configs/<node>.yaml``,
@@ -38,6 +40,7 @@ import json
 import math
 import os
 import signal
+import socket
 import sys
 import threading
 import time
@@ -73,6 +76,7 @@ from hri_physio_bringup.isolation import (
     parse_domain,
 )
 from hri_physio_bringup.lab import Lab, LabError, describe, load_lab, lsl_config, ros_environment
+from hri_physio_bringup.live import DEFAULT_LIVE
 from hri_physio_bringup.options import PROG, SessionConfig
 from hri_physio_bringup.plan import (
     COACH,
@@ -332,11 +336,26 @@ def build_parser() -> argparse.ArgumentParser:
         "hri_physio_session --lab lab.yaml --role sensor|robot|station (config/lab.example.yaml; "
         "docs/ARCHITECTURE.md, \"Running a lab\").",
     )
-    add_config_arguments(p, SessionConfig)
+    add_config_arguments(p, SessionConfig, skip=("live",))
     for group in p._action_groups:  # the launcher's options are not ROS parameters
         if group.title and group.title.startswith("options (also"):
             group.title = "session options"
+            # --live alone serves on the default address: a flag with an optional value.
+            group.add_argument("--live", dest="live", nargs="?", const=DEFAULT_LIVE, default=None,
+                               metavar="[HOST:]PORT", help=SessionConfig.help_text("live"))
     return p
+
+
+def check_live_port(address: tuple[str, int]) -> None:
+    """The live view's address must be free on this host: said before anything starts (ConfigError)."""
+    host, port = address
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind((host, port))
+        except OSError as exc:
+            raise ConfigError(f"live: cannot serve on {host}:{port}: {exc.strerror or exc}") from None
 
 
 @dataclass
@@ -372,6 +391,8 @@ class LabRun:
     hosts: HostWatch | None = None
     outages: list[dict[str, Any]] = field(default_factory=list)
     wall_offsets: dict[str, float] = field(default_factory=dict)
+    #: Per receiver: the LSL time correction it applied to the strap's samples (its last status).
+    lsl_corrections: dict[str, Any] = field(default_factory=dict)
 
     def summary(self) -> dict[str, Any]:
         lab = self.lab
@@ -383,8 +404,12 @@ class LabRun:
             "clock_offsets": {
                 "ros": "every ROS node of the lab runs on this station's /clock (use_sim_time): the "
                        "session's time is the same on every host whatever their wall clocks say",
-                "lsl": "a simulated strap stamps its samples on that clock too; a real strap stamps them on "
-                       "the sensor host's LSL clock",
+                "lsl": "the strap's samples are stamped on the sensor host's LSL clock (a simulated strap's "
+                       "follow the session's clock); the station's receivers add LSL's time correction "
+                       "(liblsl clocksync: the measured offset of that clock from the station's) to each",
+                # Per receiver: the correction applied (offset_s: the last; min_s, max_s, span_s: how it
+                # moved over the session), from its last status.
+                "lsl_time_correction": self.lsl_corrections,
                 # Receive time here minus send time there, smallest over the heartbeats: the wall-clock
                 # offset plus the one-way delay, so an upper bound of the offset.
                 "wall_offset_upper_bound_s": {role: round(v, 4) for role, v in self.wall_offsets.items()},
@@ -571,6 +596,10 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
             lab.hosts, lab.outages = hosts, hosts.outages if hosts is not None else []
             lab.wall_offsets = dict(watcher.wall_offsets)
         out.node_codes = group.stop()
+        if lab is not None:  # the receivers' last statuses (published as they stopped) hold their corrections
+            with watcher.lock:
+                lab.lsl_corrections = {name: (view.receivers.get(name) or {}).get("clock_correction")
+                                       for name in receivers}
         out.stop_seconds = dict(group.stop_seconds)
         supervision.report()
         watcher.close()
@@ -679,6 +708,8 @@ def main(argv: list[str] | None = None) -> int:
             f"{coach.participant}_{options.role}")
         # Every node's configuration, checked before anything starts (on the folder it would get).
         plan_session(options, SessionFolder.plan(options.out, label, started), device, coach)
+        if options.live_address is not None and options.role in ("", "station"):
+            check_live_port(options.live_address)
     except ConfigError as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr, flush=True)
         return 2
@@ -742,6 +773,12 @@ def _run(options: SessionConfig, plan: SessionPlan, folder: SessionFolder, claim
     domain = (f"ROS domain {claim.domain} (export ROS_DOMAIN_ID={claim.domain} to watch it)" if claim.chosen
               else f"ROS domain {claim.domain} (ROS_DOMAIN_ID)")
     console.say(f"[session] folder {folder.display()}; {domain}; LSL streams PolarH10/{plan.device_id}/*")
+    live = options.live_address
+    if live is not None:
+        host, port = live
+        where = "this host only" if host in ("127.0.0.1", "localhost", "::1") else "open to the network"
+        console.say(f"[session] live view on ws://{host}:{port} ({where}): in Foxglove, open a Foxglove "
+                    f"WebSocket connection to it with src/hri_physio_bringup/config/foxglove_layout.json")
     if lab is not None:
         console.say(describe(lab.lab, lab.role))
         console.say(f"[lab] waiting for the hosts: {', '.join(HostWatch(lab.lab, lab.role).waiting_for())}")

@@ -30,13 +30,14 @@ from hri_physio_bringup.plan import (
     CONTROLLER,
     ECG_RECEIVER,
     HR_RECEIVER,
+    LIVE,
     MOCK,
     PROCESSOR,
     VIDEO,
 )
 
 #: Nodes the session can lose for a moment; any other node is essential.
-RESTARTABLE = frozenset({CONTROLLER, MOCK, AUDIO, VIDEO, HR_RECEIVER, ECG_RECEIVER, PROCESSOR})
+RESTARTABLE = frozenset({CONTROLLER, MOCK, AUDIO, VIDEO, HR_RECEIVER, ECG_RECEIVER, PROCESSOR, LIVE})
 #: Events on /session/events (the ``event`` field).
 NODE_RESTARTED, NODE_DIED, RECEIVER_GAP = "node_restarted", "node_died", "receiver_gap"
 DEFAULT_MAX_RESTARTS = 3

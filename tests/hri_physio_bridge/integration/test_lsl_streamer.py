@@ -154,3 +154,45 @@ def test_more_outlets_than_liblsls_default_port_range_holds_are_all_found(lsl_na
     found = resolve_lsl(pred=f"starts-with(name,'{lsl_name}/')", minimum=len(outlets))
     assert sorted(int(info.name().rsplit("/", 1)[1]) for info in found) == list(range(len(outlets)))
     del outlets
+
+
+@pytest.mark.parametrize("sync", [True, False])
+def test_time_correction_is_applied_with_sync_and_reported_either_way(lsl_name: str, sync: bool) -> None:
+    """``?sync=1``: liblsl's time correction (the sender's LSL clock -> ours) is added to every stamp;
+    without it the stamps are kept bit for bit. Either way the measured offset is in the receiver's
+    status. On one host the offset is about 0: this shows the mechanism runs and is reported."""
+    outlet = pylsl.StreamOutlet(pylsl.StreamInfo(lsl_name, "Test", 1, RATE, pylsl.cf_double64, lsl_name))
+    address = f"{lsl_name}?sync=1" if sync else lsl_name
+    cfg = ReceiverConfig.from_mapping({"input": f"lsl:{address}", "output": f"lsl:{lsl_name}-relay",
+                                       "sampling_rate": RATE, "resolve_timeout": 20.0})
+    source = LslStreamer(address)
+    assert source.corrects_clock is sync
+    rx = PhysioReceiver(cfg, source, LslStreamer(f"{lsl_name}-relay"), log=logging.getLogger("test"))
+    rx.open()  # the input only: its frames are read here, not relayed
+    try:
+        wait_until(outlet.have_consumers, 20, "the receiver's inlet")
+        stamps = 5000.0 + np.arange(N) / RATE
+        outlet.push_chunk([[float(i)] for i in range(N)], timestamp=stamps.tolist())
+        got: list[float] = []
+        deadline = time.monotonic() + 20
+        while len(got) < N and time.monotonic() < deadline:
+            frame = source.receive(timeout=0.2)
+            if frame is not None:
+                got.extend(frame.timestamps.tolist())
+        assert len(got) == N
+        offsets: list[float] = []
+        wait_until(lambda: offsets.append(source.clock_offset()) or offsets[-1] is not None, 20,
+                   "liblsl's first time-correction estimate")
+        offset = offsets[-1]
+        assert abs(offset) < 0.05, f"one host, one clock: offset {offset}"
+        if sync:
+            # liblsl re-estimates the offset now and then: each stamp got the estimate of its moment.
+            np.testing.assert_allclose(np.array(got), stamps, rtol=0, atol=0.05)
+            assert np.all(np.diff(got) > 0)
+        else:
+            np.testing.assert_array_equal(np.array(got), stamps)  # unchanged, bit for bit
+        correction = rx.status()["clock_correction"]
+        assert correction["applied"] is sync and correction["measurements"] >= 1
+        assert abs(correction["offset_s"]) < 0.05 and correction["span_s"] >= 0
+    finally:
+        rx.stop()

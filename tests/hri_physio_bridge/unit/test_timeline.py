@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
-from hri_physio_bridge.timeline import RateMeter, TimelineCheck
+from hri_physio_bridge.timeline import ClockOffsetTrack, RateMeter, TimelineCheck
 
 
 def feed(check: TimelineCheck, stamps: np.ndarray, chunk: int) -> tuple[list, list]:
@@ -80,3 +82,13 @@ def test_rate_meter_waits_for_min_span_and_resets() -> None:
     assert meter.rate is None and meter.span == 0.0
     with pytest.raises(ValueError):
         RateMeter(window=1.0, min_span=2.0)
+
+
+def test_clock_offsets_are_summed_up_for_a_status() -> None:
+    track = ClockOffsetTrack(applied=True)
+    assert track.as_dict() == {"applied": True, "measurements": 0, "offset_s": None, "first_s": None,
+                               "min_s": None, "max_s": None, "span_s": None}
+    for offset in (None, 2.5, math.nan, 2.4999, 2.5003, 2.5001):
+        track.add(offset)
+    assert track.as_dict() == {"applied": True, "measurements": 4, "offset_s": 2.5001, "first_s": 2.5,
+                               "min_s": 2.4999, "max_s": 2.5003, "span_s": 0.0004}

@@ -253,6 +253,12 @@ def test_a_session_across_the_lab_gets_every_strap_sample_and_drives_the_robot_h
     assert sorted(ros["ROS_STATIC_PEERS"].split(";")) == sorted(others)
     assert summary["lab"]["outages"] == []
     assert set(summary["lab"]["clock_offsets"]["wall_offset_upper_bound_s"]) == {"sensor", "robot"}
+    # The receivers applied LSL's time correction (about 0 here: namespaces share the kernel's clock).
+    corrections = summary["lab"]["clock_offsets"]["lsl_time_correction"]
+    assert set(corrections) == {"hr_receiver", "ecg_receiver"}
+    for correction in corrections.values():
+        assert correction["applied"] is True and correction["measurements"] >= 1, corrections
+        assert abs(correction["offset_s"]) < 0.05, corrections
     cfg = (folder / "lsl_api.cfg").read_text()
     assert f"ResolveScope = {'machine' if discovery == 'peers' else 'link'}" in cfg
     assert address["sensor"] in cfg

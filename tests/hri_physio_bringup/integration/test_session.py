@@ -11,6 +11,7 @@ import json
 import os
 import re
 import signal
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -19,8 +20,10 @@ import pytest
 import yaml
 
 from helpers import NodeProcess, own_lines, session_env
+from helpers.foxglove_ws import check_against_schema, watch
 from helpers.routines import FOUR_AND_A_HALF_MINUTES, short_routine
 from helpers.session_bags import failed_nodes_logs
+from hri_physio_bridge import topics
 
 pytestmark = pytest.mark.ros
 
@@ -77,11 +80,28 @@ def test_coach_can_adapt_on_the_processors_heart_rate(short_session: list[str], 
     assert coach["ros__parameters"]["hr_topic"] == "/physio/polar_h10/ecg/hr"
 
 
+def free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
 def test_sigint_stops_every_node_and_leaves_a_bag_a_summary_and_a_report(short_session: list[str]) -> None:
-    """Ctrl-C mid-session; meanwhile a second session told to use the same ROS domain is refused."""
+    """Ctrl-C mid-session; meanwhile a second session told to use the same ROS domain is refused, and a
+    Foxglove client watches the heart rate live (--live)."""
+    port = free_port()
     with NodeProcess("hri_physio_session", *short_session, "--speed", "6", "--no-ecg",
-                     env=session_env()) as session:
+                     "--live", f"127.0.0.1:{port}", env=session_env()) as session:
         session.wait_for_output("[session] system ready", timeout=120)
+        assert f"[session] live view on ws://127.0.0.1:{port} (this host only)" in session.output
+        live = watch(f"ws://127.0.0.1:{port}", {topics.POLAR_H10_HR: 3, topics.COACH_STATE: 1}, timeout=120)
+        schema = json.loads(live.channels[topics.POLAR_H10_HR]["schema"])
+        for _log_time, payload in live.messages[topics.POLAR_H10_HR]:
+            message = json.loads(payload)
+            check_against_schema(message, schema)
+            _t, bpm = message["data"]
+            assert bpm is None or 40 < bpm < 200, message
+        assert json.loads(json.loads(live.messages[topics.COACH_STATE][0][1])["data"])["phase"]
         first = json.loads((session_folder_of_running(session.output) / "summary.json").read_text())
         # A domain of its own: not the one this test process holds.
         assert first["outcome"] == "running" and first["ros_domain"] != int(os.environ["ROS_DOMAIN_ID"])
@@ -137,6 +157,7 @@ def session_folder_of_running(output: str) -> Path:
     (["--conf", "/nonexistent/coach.yaml"], "conf: /nonexistent/coach.yaml does not exist"),
     (["--hr-source", "ecg", "--no-ecg"], "hr_source ecg needs the ECG path"),
     (["--policy", "bogus"], "--policy: invalid choice"),
+    (["--live", "localhost:99999"], "live: expected [HOST:]PORT with a port from 1 to 65535"),
 ])
 def test_bad_options_are_one_clear_line(args: list[str], message: str, tmp_path: Path) -> None:
     c = run_session(*args, "--out", str(tmp_path / "s"))

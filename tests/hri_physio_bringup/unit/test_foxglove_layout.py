@@ -113,3 +113,14 @@ def test_the_panels_the_issue_asks_for(layout: dict) -> None:
     images = [cfg for pid, cfg in config.items() if pid.startswith("Image!")]
     assert [cfg["imageMode"]["imageTopic"] for cfg in images] == [topics.VIDEO_PREVIEW]
     assert any(pid.startswith("RosOut!") for pid in config)
+
+
+def test_the_live_view_serves_every_topic_the_layout_reads(layout: dict) -> None:
+    """The same layout works on the live connection (hri_physio_session --live) as on the bag: every
+    topic its panels and scripts read is a channel of the live view, of the same name."""
+    from hri_physio_bringup.live import LIVE_TOPICS
+
+    scripts = _scripts(layout)
+    read = {topic for inputs, _out in scripts.values() for topic in inputs}
+    read |= {topic for topic in _referenced(layout["configById"]) if not topic.startswith(SCRIPT_PREFIX)}
+    assert read and read <= set(LIVE_TOPICS), sorted(read - set(LIVE_TOPICS))

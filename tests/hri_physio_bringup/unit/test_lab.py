@@ -246,6 +246,17 @@ def test_each_role_runs_its_share_of_the_nodes_and_together_they_run_them_all(tm
     assert [n.name for n in for_role(polar, "sensor").nodes] == [POLAR_STREAMER]
 
 
+def test_in_a_lab_the_receivers_apply_lsl_time_correction(tmp_path: Path) -> None:
+    """The strap's samples come from the sensor host's LSL clock: the station's receivers add liblsl's
+    time correction (?sync=1); on one host they keep the stamps as they are."""
+    lab_file = tmp_path / "lab.yaml"
+    lab_file.write_text("any: file\n")  # plan_session does not read it
+    for options, query in (({}, ""), ({"lab": str(lab_file), "role": "station"}, "?sync=1")):
+        plan = plan_of(tmp_path, **options)
+        assert plan.node(HR_RECEIVER).config.input == f"lsl:PolarH10/SIMLAB1/HR{query}"
+        assert plan.node(ECG_RECEIVER).config.input == f"lsl:PolarH10/SIMLAB1/ECG{query}"
+
+
 @pytest.mark.parametrize(("options", "expected"), [
     ({"role": "robot"}, "needs both --lab <lab file> and --role"),
     ({"lab": "lab.yaml"}, "--lab needs --role sensor|robot|station"),

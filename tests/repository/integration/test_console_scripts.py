@@ -35,6 +35,7 @@ NODES = {
     "simulated_participant": "age",
     "audio_streamer": "fade",
     "video_streamer": "width",
+    "live_view": "port",
 }
 #: Tools and launchers -> a numeric flag.
 TOOLS = {

@@ -164,6 +164,15 @@ class Streamer(abc.ABC):
         """Input chunks received by the transport but not yet taken with :meth:`receive`."""
         return 0
 
+    #: Whether this input's timestamps are mapped onto the local clock (LSL time correction, ``sync=1``).
+    corrects_clock = False
+
+    def clock_offset(self) -> float | None:
+        """This input's clock offset: what a timestamp taken on the source's clock needs added to be on
+        ours, in s, as last measured (LSL's time correction); None where the transport measures none
+        (yet)."""
+        return None
+
     #: Whether :meth:`consumer_count` can count listeners (not just tell whether there is one).
     counts_consumers = False
 

@@ -3,9 +3,14 @@
 Address: ``<stream name>[?type=<type>&source_id=<id>&sync=1]``, e.g.
 ``lsl:PolarH10/1234/ECG`` or ``lsl:PolarH10/1234/ECG?type=ECG``. As an input the
 stream is resolved by name (and type / source id when given); ``sync=1`` turns
-on liblsl clock synchronisation for streams coming from another machine (off by
-default: on one machine the sender's timestamps are already on our clock, and
-we keep them unchanged).
+on liblsl's clock synchronisation (``proc_clocksync``) for streams coming from
+another machine: each timestamp gets the measured offset between the sender's
+LSL clock and ours added, so it is on this host's clock. It is off by default
+(on one machine the sender's timestamps are already on our clock, and we keep
+them unchanged); a lab's station turns it on. Only clocksync: liblsl's dejitter
+would replace the stamps by a regression line and hide the gaps and clock jumps
+the receiver reports. Either way the measured offset is reported
+(:meth:`LslStreamer.clock_offset`).
 """
 
 from __future__ import annotations
@@ -44,6 +49,8 @@ _FROM_LSL = {v: k for k, v in _TO_LSL.items()}
 _QUERY_KEYS = {"type", "source_id", "sync"}
 #: Seconds between two looks at the resolver's results while waiting for an input stream.
 RESOLVE_POLL = 0.05
+#: Seconds a status waits for liblsl's first time-correction estimate (later ones are instantaneous).
+OFFSET_TIMEOUT = 0.05
 #: Seconds a closing outlet with consumers waits for them to take its last chunk (liblsl has no flush).
 LINGER = 0.2
 
@@ -92,6 +99,7 @@ class LslStreamer(Streamer):
         self._inlet: pylsl.StreamInlet | None = None
         self._outlet: pylsl.StreamOutlet | None = None
         self._dtype: np.dtype | None = None
+        self.corrects_clock = self.params.get("sync", "0").lower() in ("1", "true", "yes")
 
     # -- input ---------------------------------------------------------------
     def _predicate(self) -> str:
@@ -142,7 +150,7 @@ class LslStreamer(Streamer):
         spec = _spec_from_info(info)
         if expected is not None:
             check_matches(spec, expected, self.uri)
-        flags = pylsl.proc_clocksync if self.params.get("sync") in ("1", "true", "yes") else 0
+        flags = pylsl.proc_clocksync if self.corrects_clock else 0
         self._inlet = pylsl.StreamInlet(
             info, max_buflen=self.max_buflen, recover=False, processing_flags=flags
         )
@@ -164,6 +172,16 @@ class LslStreamer(Streamer):
         except pylsl.util.LostError:
             return 0
         return -(-waiting // self.max_chunk)
+
+    def clock_offset(self) -> float | None:
+        """liblsl's current time correction of this inlet (s): applied to every timestamp with
+        ``sync=1``, measured only otherwise. None before its first estimate or without an inlet."""
+        if self._inlet is None:
+            return None
+        try:
+            return float(self._inlet.time_correction(timeout=OFFSET_TIMEOUT))
+        except (pylsl.util.TimeoutError, pylsl.util.LostError):
+            return None
 
     def receive(self, timeout: float = 0.1) -> Frame | None:
         if self._inlet is None or self.spec is None:
