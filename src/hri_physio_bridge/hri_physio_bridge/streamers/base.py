@@ -156,6 +156,17 @@ class Streamer(abc.ABC):
         Raises StreamLostError when the source has gone away.
         """
 
+    def _check_publishable(self, frame: Frame, is_open: bool, carries: str) -> StreamSpec:
+        """The output's spec, once ``frame`` fits it. Raises StreamerError when the output is not open,
+        StreamMismatchError when the frame's channels differ (``carries``: how the message names the
+        output, e.g. "/topic carries")."""
+        if not is_open or self.spec is None:
+            raise StreamerError(f"{self.uri} is not open as an output")
+        if frame.num_channels != self.spec.channel_count:
+            raise StreamMismatchError(
+                f"frame has {frame.num_channels} channels, {carries} {self.spec.channel_count}")
+        return self.spec
+
     @abc.abstractmethod
     def publish(self, frame: Frame) -> None:
         """Send a frame of samples."""

@@ -234,16 +234,10 @@ class LslStreamer(Streamer):
         self._dtype = numpy_dtype(spec.dtype)
 
     def publish(self, frame: Frame) -> None:
-        if self._outlet is None or self.spec is None:
-            raise StreamerError(f"{self.uri} is not open as an output")
-        if frame.num_channels != self.spec.channel_count:
-            raise StreamMismatchError(
-                f"frame has {frame.num_channels} channels, LSL output {self.name} declares "
-                f"{self.spec.channel_count}"
-            )
+        spec = self._check_publishable(frame, self._outlet is not None, f"LSL output {self.name} declares")
         if frame.num_samples == 0:
             return
-        if self.spec.is_string:
+        if spec.is_string:
             data = [[str(v) for v in row] for row in frame.values]
         else:
             data = np.ascontiguousarray(cast_for_output(frame.values, self._dtype, self.uri))

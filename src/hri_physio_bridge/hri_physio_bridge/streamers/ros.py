@@ -24,7 +24,6 @@ from hri_physio_bridge.ros_frames import frame_to_msg, msg_to_frame, msg_to_mark
 from hri_physio_bridge.streamers.base import (
     Streamer,
     StreamerError,
-    StreamMismatchError,
     StreamSpec,
     numpy_dtype,
 )
@@ -145,13 +144,8 @@ class RosStreamer(Streamer):
         self.spec = spec
 
     def publish(self, frame: Frame) -> None:
-        if self._pub is None or self.spec is None:
-            raise StreamerError(f"{self.uri} is not open as an output")
-        if frame.num_channels != self.spec.channel_count:
-            raise StreamMismatchError(
-                f"frame has {frame.num_channels} channels, {self.topic} carries {self.spec.channel_count}"
-            )
-        if self.spec.is_string:
+        spec = self._check_publishable(frame, self._pub is not None, f"{self.topic} carries")
+        if spec.is_string:
             for msg in string_frame_to_msgs(frame):
                 self._pub.publish(msg)
         else:

@@ -291,15 +291,8 @@ class AdaptivePolicy(PredictivePolicy):
             return self._choose(inp, c, "plan for the conditioning")
         return None
 
-    def propose(self, inp: RuleInput) -> Proposal:
-        c = inp.controls
-        if c is None or self.level_of(c) is None:
-            return Proposal(0, "no exercise setting to adapt")
-        self.model.rest = inp.zone.hr_rest
-        self.model.add_window(c.window_start, inp.t, inp.hr)
+    def _decide(self, inp: RuleInput, c: Controls) -> Proposal:
         zone = inp.zone
-        if inp.phase == COOL_DOWN:
-            return Proposal(0, "cool-down: holding the easiest setting")
         est = self.fit_now(inp.t)
         if est is None:
             return Proposal(0, "no heart-rate response to go on yet")

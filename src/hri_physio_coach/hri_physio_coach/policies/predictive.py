@@ -205,15 +205,27 @@ class PredictivePolicy(BasePolicy):
         self.last_change = inp.t
         return Proposal(s.index - c.index, f"{text} (level {s.level}, step {s.index})", level=level)
 
-    def propose(self, inp: RuleInput) -> Proposal:
+    def _learn(self, inp: RuleInput) -> Proposal | None:
+        """Add the window just measured to the model; the answer when there is nothing to decide (no
+        exercise setting, or the cool-down), else None."""
         c = inp.controls
         if c is None or self.level_of(c) is None:
             return Proposal(0, "no exercise setting to adapt")
         self.model.rest = inp.zone.hr_rest
         self.model.add_window(c.window_start, inp.t, inp.hr)
-        zone = inp.zone
         if inp.phase == COOL_DOWN:
             return Proposal(0, "cool-down: holding the easiest setting")
+        return None
+
+    def propose(self, inp: RuleInput) -> Proposal:
+        settled = self._learn(inp)
+        if settled is not None or inp.controls is None:
+            return settled or Proposal(0, "no exercise setting to adapt")
+        return self._decide(inp, inp.controls)
+
+    def _decide(self, inp: RuleInput, c: Controls) -> Proposal:
+        """The rule update's decision, once the window is learnt and there is a setting to change."""
+        zone = inp.zone
         measuring = inp.phase == WARM_UP and inp.t < inp.phase_end - self.lead - 1e-6
         if measuring and inp.hr < zone.low:
             return Proposal(0, "warm-up: measuring the response, not climbing the ladder")
