@@ -415,7 +415,8 @@ class PhysioReceiver:
 
     def _take_what_arrived(self) -> None:
         """On a stop: what the input already holds is forwarded too, until it is empty (within
-        :meth:`_drain_budget`; what an input still delivering after that is left unread is said as an error)."""
+        :meth:`_drain_budget`; what an input still delivering after that is left unread is said as an
+        error)."""
         budget = self._drain_budget()
         deadline = self._monotonic() + budget
         taken = 0
