@@ -39,14 +39,16 @@ class ExecutorThread:
 
     ``context`` is the rclpy context of the nodes (None: the default one). The thread waits until a
     message, a timer or :meth:`close` comes: an idle node costs nothing (it used to wake 20 times a
-    second to look at a flag, rebuilding its wait set each time).
+    second to look at a flag, rebuilding its wait set each time). The executor is
+    :class:`hri_physio_bridge.executor.LeanExecutor`, which keeps its wait set between wake-ups.
     """
 
     def __init__(self, *nodes: Any, context: Any = None) -> None:
-        from rclpy.executors import SingleThreadedExecutor
         from rclpy.task import Future
 
-        self.executor = SingleThreadedExecutor(context=context)
+        from hri_physio_bridge.executor import LeanExecutor
+
+        self.executor = LeanExecutor(context=context)
         for node in nodes:
             self.executor.add_node(node)
         self._closed: Any = Future()  # done at close(): ends the spin, waking its wait
