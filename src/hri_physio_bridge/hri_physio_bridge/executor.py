@@ -39,6 +39,15 @@ def _is_coroutine(callback: Any) -> bool:
         not inspect.isroutine(callback) and inspect.iscoroutinefunction(type(callback).__call__))
 
 
+def _take(entity: Any, take: Any) -> Any:
+    """``take(handle)`` on the entity's handle held; None once the entity is destroyed."""
+    try:
+        with entity.handle:
+            return take(entity.handle)
+    except InvalidHandle:
+        return None
+
+
 class _Entities:
     """What one wait waits on: every node's entities, their handles, and the wait set sized for them."""
 
@@ -296,11 +305,7 @@ class LeanExecutor(Executor):
             callback(**{name: timer_info})
 
     def _take_message(self, sub: Any) -> None:
-        try:
-            with sub.handle:
-                taken = sub.handle.take_message(sub.msg_type, sub.raw)
-        except InvalidHandle:
-            return
+        taken = _take(sub, lambda handle: handle.take_message(sub.msg_type, sub.raw))
         if taken is None:
             return
         if sub._callback_type is Subscription.CallbackType.MessageOnly:
@@ -309,13 +314,10 @@ class LeanExecutor(Executor):
             self._call(sub.callback, *taken)
 
     def _take_response(self, client: Any) -> None:
-        try:
-            with client.handle:
-                header, response = client.handle.take_response(client.srv_type.Response)
-        except InvalidHandle:
+        taken = _take(client, lambda handle: handle.take_response(client.srv_type.Response))
+        if taken is None or taken[0] is None:
             return
-        if header is None:
-            return
+        header, response = taken
         try:
             future = client.get_pending_request(header.request_id.sequence_number)
         except KeyError:  # the request was cancelled
@@ -324,13 +326,10 @@ class LeanExecutor(Executor):
         future.set_result(response)
 
     def _take_request(self, srv: Any) -> None:
-        try:
-            with srv.handle:
-                request, header = srv.handle.service_take_request(srv.srv_type.Request)
-        except InvalidHandle:
+        taken = _take(srv, lambda handle: handle.service_take_request(srv.srv_type.Request))
+        if taken is None or taken[1] is None:
             return
-        if header is None:
-            return
+        request, header = taken
         if _is_coroutine(srv.callback):
             async def serve() -> None:
                 srv.send_response(await srv.callback(request, srv.srv_type.Response()), header)
