@@ -50,6 +50,10 @@ COACH_EVENTS = "/coach/events"
 COACH_STATE = "/coach/state"
 COACH_CONTROL = "/coach/control"
 PARTICIPANT_STATE = "/participant/state"
+#: The simulated participant's confirmation of each robot command and audio status it took in (JSON):
+#: the session launcher holds sim time until it comes, so the person takes every instruction up on
+#: the same mark however busy the machine.
+PARTICIPANT_HEARD = "/participant/heard"
 
 # --- the session launcher ---------------------------------------------------------------------------
 #: Supervision events (JSON): a node restarted, a receiver's gap, a node whose loss ended the session.

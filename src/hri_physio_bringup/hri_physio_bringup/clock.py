@@ -15,7 +15,15 @@ faster than real life, where every node keeps up) while the loop lags behind it:
 * the coach's rule updates: never up to the end of a rule update's wait for late heart rate
   (``hr_wait``) before the coach has decided it (its ``/coach/state`` says which one is next). Here
   the clock stops rather than slows: a coach process starved for a moment would otherwise handle a
-  burst of ``/clock`` before the heart rate queued behind it, and decide without it.
+  burst of ``/clock`` before the heart rate queued behind it, and decide without it;
+* a simulated participant's uptake: a robot command or an audio status heard by the launcher after
+  the coach's session start is taken up by the person on the next mark of ``reaction_period``
+  (:func:`~hri_physio_coach.participant.physiology.takes_effect`), provided the person hears it
+  ``TAKE_IN_TIME`` before that mark. The clock stops short of that moment until the participant
+  confirms the message on ``/participant/heard`` (:func:`~hri_physio_coach.participant.perception.receipt`):
+  a participant process starved for a moment would otherwise take the instruction up a mark late
+  and run another session than the evaluation's. Confirmations that still came too late are
+  counted (``late_uptakes``).
 
 A hold lasts at most ``max_hold`` wall seconds (a strap that stopped, a crashed controller): then
 the clock goes on at full speed and the release is counted. Every hold is counted by its cause,
@@ -31,11 +39,17 @@ from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from hri_physio_coach.participant.physiology import SAME_TIME as SAME_MARK
+from hri_physio_coach.participant.physiology import TAKE_IN_TIME, takes_effect
+
 #: Sim seconds per /clock message: no larger than any sim-time node's timer period
 #: (coach tick, participant update and the mock's joint states), or timers skip periods.
 CLOCK_STEP = 0.1
 #: Causes of a hold (keys of :attr:`ClockGuard.holds` and :attr:`ClockGuard.released`).
 HR, ROBOT, MEDIA, DECISION = "heart_rate", "robot_reply", "media_status", "coach_decision"
+UPTAKE = "participant_uptake"
+#: Causes that stop the clock rather than slow it.
+STOPPING = frozenset({DECISION, UPTAKE})
 
 
 class SimClock:
@@ -50,11 +64,16 @@ class SimClock:
     def __init__(self, start: float, speed: float, monotonic: Callable[[], float] = time.monotonic,
                  creep: float = 1.0) -> None:
         self.t = start  # the last value published
+        # Sim time is kept as seconds since ``start`` and published as start + steps * CLOCK_STEP: at
+        # ~1.8e9 s every float sum rounds, and thousands of sums would move the clock off the whole
+        # and half seconds the coach and the participant count on (1035 steps: 1e-4 s short).
+        self._start = start
+        self._steps = 0  # values published
         self.speed = speed
         self.creep = min(creep, speed)  # sim seconds per wall second beyond a limit
         self._monotonic = monotonic
         self._wall = monotonic()
-        self._position = start  # continuous sim time; published in whole steps
+        self._ran = 0.0  # continuous sim time since start; published in whole steps
         #: Wall seconds the clock lost to limits (what it would have run at ``speed``, less what it ran).
         self.held_wall = 0.0
 
@@ -62,26 +81,50 @@ class SimClock:
         """Wall seconds until the next clock value is due at ``speed`` (0: due now). With a limit in
         force it comes later, never sooner: a loop that sleeps this long misses no step."""
         elapsed = max(0.0, self._monotonic() - self._wall)
-        ahead = self.t + CLOCK_STEP - (self._position + elapsed * self.speed)
+        ahead = (self._steps + 1) * CLOCK_STEP - (self._ran + elapsed * self.speed)
         return max(0.0, ahead / self.speed)
 
-    def due_steps(self, limit: float | None = None, hard: bool = False) -> list[float]:
+    def due_steps(self, limit: float | None = None, stop: float | None = None) -> list[float]:
         """The clock values to publish now to keep up with the wall clock: at real time past ``limit``,
-        or (``hard``) not past it at all."""
+        and never past ``stop``."""
         wall = self._monotonic()
         elapsed, self._wall = max(0.0, wall - self._wall), wall
-        free = self._position + elapsed * self.speed
-        if limit is not None and free > limit:
-            slow = self._position if hard else self._position + elapsed * self.creep
-            reached = max(min(free, limit), slow)
-            self.held_wall += (free - reached) / self.speed
-            free = reached
-        self._position = max(self._position, free)
+        free = reached = self._ran + elapsed * self.speed
+        if limit is not None and reached > limit - self._start:
+            reached = max(limit - self._start, self._ran + elapsed * self.creep)
+        if stop is not None and reached > stop - self._start:
+            reached = max(stop - self._start, self._ran)
+        reached = min(reached, free)
+        self.held_wall += (free - reached) / self.speed
+        self._ran = max(self._ran, reached)
         steps = []
-        while self.t + CLOCK_STEP <= self._position + 1e-9:
-            self.t += CLOCK_STEP
+        while (self._steps + 1) * CLOCK_STEP <= self._ran + 1e-9:
+            self._steps += 1
+            self.t = self._start + self._steps * CLOCK_STEP
             steps.append(self.t)
         return steps
+
+
+class ClockHistory:
+    """The /clock values published, by wall time: what sim time it was when a message was sent.
+
+    A launcher that hears a message late (its own process busy) would otherwise date it by the clock
+    it has run on to since; the message's source timestamp (wall time, from DDS) says which value
+    was the newest when it went out.
+    """
+
+    def __init__(self, size: int = 4096) -> None:
+        self._entries: deque[tuple[int, float]] = deque(maxlen=size)  # (wall ns, sim time), in order
+
+    def published(self, wall_ns: int, t: float) -> None:
+        self._entries.append((wall_ns, t))
+
+    def at(self, wall_ns: int) -> float | None:
+        """The last value published at or before ``wall_ns`` (None: before what is kept)."""
+        for published, t in reversed(self._entries):
+            if published <= wall_ns:
+                return t
+        return None
 
 
 class InFlight:
@@ -138,6 +181,89 @@ class InFlight:
             self._settled += 1
 
 
+
+@dataclass
+class _Instruction:
+    sent: float  # sim time the launcher heard it go out
+    wall: float  # monotonic time then
+    topic: str
+    key: int
+
+
+class Uptakes:
+    """Instructions a simulated participant follows, and its receipts for them, matched by topic and key
+    in whichever order they are heard (they travel on different topics from different nodes).
+
+    Before the session start the person follows an instruction at once: nothing to wait for, but the
+    instruction is still matched with its receipt, or that receipt would later confirm another message
+    with the same text. What is not matched within ``expiry`` wall seconds is dropped.
+    """
+
+    def __init__(self, period: float, expiry: float, monotonic: Callable[[], float]) -> None:
+        self.period = period
+        self.expiry = expiry
+        self._monotonic = monotonic
+        self.start: float | None = None
+        self.late = 0  # receipts whose time puts the uptake on a later mark than the instruction's
+        self.late_examples: list[dict[str, object]] = []  # the first few, for summary.json
+        self._unconfirmed: list[_Instruction] = []
+        self._early: deque[tuple[float, str, int, float]] = deque()  # (wall, topic, key, heard at)
+
+    def session_started(self, t: float) -> None:
+        if self.start is None and math.isfinite(t):
+            self.start = t
+
+    def mark(self, t: float) -> float | None:
+        """When an instruction heard at ``t`` is taken up (None: at once, or no session yet)."""
+        if self.period <= 0 or self.start is None or t < self.start:
+            return None
+        return takes_effect(t, self.start, self.period)
+
+    def sent(self, topic: str, key: int, sim_now: float) -> None:
+        if self.period <= 0 or not math.isfinite(sim_now):
+            return
+        wall = self._monotonic()
+        self._expire(wall)
+        for i, (_wall, e_topic, e_key, heard_at) in enumerate(self._early):
+            if (e_topic, e_key) == (topic, key):
+                del self._early[i]
+                self._check(topic, sim_now, heard_at)
+                return
+        self._unconfirmed.append(_Instruction(sim_now, wall, topic, key))
+
+    def heard(self, topic: str, key: int, heard_at: float) -> None:
+        for i, item in enumerate(self._unconfirmed):
+            if (item.topic, item.key) == (topic, key):
+                del self._unconfirmed[i]
+                self._check(topic, item.sent, heard_at)
+                return
+        self._early.append((self._monotonic(), topic, key, heard_at))
+
+    def deadline(self) -> float | None:
+        """How far the participant's clock may run before an instruction is heard too late (None: free):
+        ``TAKE_IN_TIME`` short of its mark, with half a clock step to spare."""
+        marks = [m for m in (self.mark(item.sent) for item in self._unconfirmed) if m is not None]
+        return min(marks) - TAKE_IN_TIME - CLOCK_STEP / 2 if marks else None
+
+    def give_up(self) -> None:
+        self._unconfirmed.clear()
+
+    def _check(self, topic: str, sent: float, heard_at: float) -> None:
+        mark = self.mark(sent)
+        if mark is not None and heard_at >= mark - TAKE_IN_TIME - SAME_MARK:
+            self.late += 1
+            if len(self.late_examples) < 5:
+                assert self.start is not None
+                self.late_examples.append({"topic": topic, "sent_s": round(sent - self.start, 3),
+                                           "heard_s": round(heard_at - self.start, 3)})
+
+    def _expire(self, wall: float) -> None:
+        while self._early and wall - self._early[0][0] > self.expiry:
+            self._early.popleft()
+        self._unconfirmed = [item for item in self._unconfirmed
+                             if self.mark(item.sent) is not None or wall - item.wall <= self.expiry]
+
+
 @dataclass
 class ClockGuard:
     """How far sim time may run now, from what the loop has done (see the module's docstring)."""
@@ -157,9 +283,13 @@ class ClockGuard:
     _released_decision: float | None = None
     _commands: InFlight = field(default_factory=InFlight)  # robot commands and the controller's replies
     _media: InFlight = field(default_factory=InFlight)  # audio requests and the streamer's settled count
+    #: The simulated participant's ``reaction_period`` (0: no participant to wait for, or one that
+    #: takes instructions up at once, which no hold can make the same on every machine).
+    reaction_period: float = 0.0
+    _uptakes: Uptakes = field(init=False)
     _holding: str | None = None
     _since: float = 0.0
-    _hard: bool = False
+    _stop: float | None = None
 
     # --- what the loop did ---------------------------------------------------------------------
     def hr_sample(self, source_t: float, sim_now: float) -> None:
@@ -189,6 +319,26 @@ class ClockGuard:
         """The streamer's status: ``settled`` requests started, failed or superseded so far."""
         self._media.answered(total=settled)
 
+    def __post_init__(self) -> None:
+        self._uptakes = Uptakes(self.reaction_period, self.max_hold, self.monotonic)
+
+    @property
+    def late_uptakes(self) -> int:
+        """Instructions the participant took in too late to take them up on their mark."""
+        return self._uptakes.late
+
+    def session_started(self, t: float) -> None:
+        """The coach's ``session_start`` (the participant's marks run from it)."""
+        self._uptakes.session_started(t)
+
+    def instruction(self, topic: str, key: int, sim_now: float) -> None:
+        """A message the participant follows (``key``: its ``message_key``) went out at ``sim_now``."""
+        self._uptakes.sent(topic, key, sim_now)
+
+    def participant_heard(self, topic: str, key: int, heard_at: float) -> None:
+        """The participant's receipt: it took the message ``key`` on ``topic`` in at ``heard_at``."""
+        self._uptakes.heard(topic, key, heard_at)
+
     # --- the limit -----------------------------------------------------------------------------
     def _limits(self) -> dict[str, float]:
         out: dict[str, float] = {}
@@ -200,24 +350,27 @@ class ClockGuard:
                 out[cause] = oldest + self.reply_lag
         if self._decision is not None and self._decision != self._released_decision:
             out[DECISION] = self._decision + self.hr_wait - CLOCK_STEP
+        deadline = self._uptakes.deadline()
+        if deadline is not None:
+            out[UPTAKE] = deadline
         return out
 
     @property
-    def hard(self) -> bool:
-        """Whether the limit :meth:`limit` last returned stops the clock (a coach decision) or slows it
-        (once the clock reaches it)."""
-        return self._hard
+    def stop(self) -> float | None:
+        """Where :meth:`limit`'s last call says the clock must stop (a coach decision, a participant's
+        uptake) rather than slow down; None: nowhere."""
+        return self._stop
 
     def limit(self, clock_t: float) -> float | None:
         """How far the clock may run at full speed now (None: no limit), given it stands at ``clock_t``."""
         limits = self._limits()
-        self._hard = False
+        stops = [v for cause, v in limits.items() if cause in STOPPING]
+        self._stop = min(stops) if stops else None
         if not limits:
             self._holding = None
             return None
         cause = min(limits, key=limits.__getitem__)
         limit = limits[cause]
-        self._hard = cause == DECISION
         if limit >= clock_t + CLOCK_STEP - 1e-9:  # the clock can take its next step: not held
             self._holding = None
             return limit
@@ -238,10 +391,13 @@ class ClockGuard:
             self._hr_released = True  # until the next sample
         elif cause == DECISION:
             self._released_decision = self._decision  # the coach gives up on late heart rate itself
+        elif cause == UPTAKE:
+            self._uptakes.give_up()  # a participant that died, or never heard them
         else:
             (self._commands if cause == ROBOT else self._media).give_up()
 
     def report(self, clock: SimClock) -> dict[str, object]:
         """For summary.json: wall seconds held, holds and releases by cause."""
         return {"held_wall_s": round(clock.held_wall, 3), "holds": dict(self.holds),
-                "released": dict(self.released)}
+                "released": dict(self.released), "late_uptakes": self.late_uptakes,
+                **({"late_examples": self._uptakes.late_examples} if self._uptakes.late_examples else {})}

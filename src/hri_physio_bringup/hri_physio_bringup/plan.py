@@ -86,6 +86,8 @@ class SessionPlan:
     nodes: tuple[NodeLaunch, ...]
     #: (topic, node) pairs: the session starts once each node subscribes to its topic (no request lost).
     listeners: tuple[tuple[str, str], ...] = ()
+    #: The simulated participant's reaction period (s; 0: no simulated participant, or one reacting at once).
+    reaction_period: float = 0.0
 
     @property
     def hr_topic(self) -> str:
@@ -269,7 +271,9 @@ def plan_session(options: SessionConfig, folder: SessionFolder, device_id: str,
         if not options.no_ecg:
             recorded += [topics.POLAR_H10_ECG_HR, f"{topics.POLAR_H10_ECG}/status"]
         listeners += [(topic, capture) for topic in recorded]
-    return SessionPlan(coach, duration, device_id, tuple(nodes), tuple(listeners))
+    participant = next((n.config for n in nodes if n.name == PARTICIPANT), None)
+    reaction = participant.params.reaction_period if isinstance(participant, ParticipantNodeConfig) else 0.0
+    return SessionPlan(coach, duration, device_id, tuple(nodes), tuple(listeners), reaction)
 
 
 def listener_role(node: str) -> str | None:

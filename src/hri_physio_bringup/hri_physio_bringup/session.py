@@ -56,7 +56,7 @@ from hri_physio_bridge.launcher import ManagedProcess, ProcessGroup
 from hri_physio_bridge.ros_tools import BackgroundNode, clock_message
 from hri_physio_bridge.stop_signals import install_stop_handlers
 from hri_physio_bridge.waiting import wait_until
-from hri_physio_bringup.clock import ClockGuard, SimClock
+from hri_physio_bringup.clock import ClockGuard, ClockHistory, SimClock
 from hri_physio_bringup.console import (
     LiveConsole,
     PlainConsole,
@@ -88,6 +88,7 @@ from hri_physio_bringup.plan import (
 )
 from hri_physio_bringup.supervision import Loss, Restart, Supervisor, gap_line, restarts_text, status_text
 from hri_physio_bringup.view import SessionView, overdue, session_counts, summary
+from hri_physio_coach.participant.perception import message_key, parse_receipt
 
 #: Session seconds past the routine's end after which a coach that has not ended is stopped.
 END_MARGIN = 60.0
@@ -122,6 +123,7 @@ class ClockAndWatcher(BackgroundNode):
         self.guard = guard
         self.lock = threading.Lock()
         self.sim_now = math.nan  # the last /clock published: what sim time it is when a sample arrives
+        self.clock_history = ClockHistory()  # which /clock value was the newest when a message went out
         # Deep: at high --speed hundreds of clock messages a second must reach the recorder too.
         self.clock_pub = self.node.create_publisher(Clock, "/clock", CLOCK_DEPTH)
         self.control_pub = self.node.create_publisher(String, topics.COACH_CONTROL, command_qos())
@@ -170,6 +172,8 @@ class ClockAndWatcher(BackgroundNode):
         def on_event(msg: String) -> None:
             with self.lock:
                 view.on_event_text(msg.data)
+                if guard is not None and view.started_at is not None:
+                    guard.session_started(view.started_at)
 
         def set_state(data: dict) -> None:
             view.state = data
@@ -282,6 +286,12 @@ class ClockAndWatcher(BackgroundNode):
                     action(msg)
             return callback
 
+        def locked_with_info(action: Callable[[Any, dict], None]) -> Callable[[Any, dict], None]:
+            def callback(msg: Any, info: dict) -> None:  # rclpy passes MessageInfo to a 2-argument callback
+                with self.lock:
+                    action(msg, info)
+            return callback
+
         def settled(msg: Any) -> None:
             try:
                 counts = json.loads(msg.data).get("requests") or {}
@@ -290,21 +300,46 @@ class ClockAndWatcher(BackgroundNode):
                 return  # not a status this launcher can read: the recorder keeps it as it is
             guard.media_settled(done)
 
+        def sent_at(info: dict) -> float:
+            """The sim time when a message went out, from its source timestamp (the clock may have run on
+            before this thread heard it); the received time bounds a sender whose wall clock runs ahead."""
+            wall = min(int(info.get("source_timestamp") or 0) or math.inf,
+                       int(info.get("received_timestamp") or 0) or math.inf)
+            t = self.clock_history.at(int(wall)) if math.isfinite(wall) else None
+            return self.sim_now if t is None else t
+
+        def command(msg: Any, info: dict) -> None:
+            guard.command_sent(self.sim_now)
+            guard.instruction(topics.QT_COMMANDS, message_key(msg.data), sent_at(info))
+
+        def status(msg: Any, info: dict) -> None:
+            settled(msg)
+            guard.instruction(topics.AUDIO_STATUS, message_key(msg.data), sent_at(info))
+
+        def heard(msg: Any) -> None:
+            confirmation = parse_receipt(msg.data)
+            if confirmation is not None:
+                guard.participant_heard(*confirmation)
+
         sub, now = self.node.create_subscription, lambda: self.sim_now
-        sub(String, topics.QT_COMMANDS, locked(lambda _m: guard.command_sent(now())), command_qos())
+        sub(String, topics.QT_COMMANDS, locked_with_info(command), command_qos())
         sub(String, topics.QT_REPLIES, locked(lambda _m: guard.command_answered()), command_qos())
         sub(String, topics.AUDIO_REQUEST, locked(lambda _m: guard.media_requested(now())), command_qos())
-        sub(String, topics.AUDIO_STATUS, locked(settled), event_qos())
+        sub(String, topics.AUDIO_STATUS, locked_with_info(status), event_qos())
+        if guard.reaction_period > 0:
+            sub(String, topics.PARTICIPANT_HEARD, locked(heard), event_qos(100))
 
     def advance(self, clock: SimClock) -> None:
         """Publish the clock values that are due, no further than the guard allows."""
         with self.lock:
             limit = None if self.guard is None else self.guard.limit(clock.t)
-            hard = self.guard is not None and self.guard.hard
-        for t in clock.due_steps(limit, hard):
+            stop = None if self.guard is None else self.guard.stop
+        for t in clock.due_steps(limit, stop):
             self.publish_clock(t)
 
     def publish_clock(self, t: float) -> None:
+        with self.lock:
+            self.clock_history.published(time.time_ns(), t)
         self.clock_pub.publish(clock_message(t))
         self.sim_now = t
 
@@ -532,7 +567,8 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
     """Start the nodes, wait for them, run the routine to its end (or a stop); returns the sim clock."""
     receivers = {name: topic for name, (topic, _rate) in plan.receivers.items()}
     # A simulated participant's loop can be held to the clock; a real strap lives in real time.
-    guard = None if options.polar else ClockGuard(hr_wait=plan.coach.hr_wait)
+    guard = None if options.polar else ClockGuard(hr_wait=plan.coach.hr_wait,
+                                                  reaction_period=plan.reaction_period)
     strap = next((n.name for n in plan.nodes if n.script == POLAR_STREAMER), None)
     supervisor = Supervisor(options.max_restarts)
     hosts = None if lab is None else HostWatch(lab.lab, lab.role)

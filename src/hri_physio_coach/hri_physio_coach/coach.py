@@ -175,6 +175,9 @@ class ExerciseCoach(Listener):
             self.engine = ScenarioEngine(routine, clock, self._emit, self._on_action, hooks, listener=self)
         except ValueError as exc:
             raise CoachError(str(exc)) from None
+        self.engine.gate = self._hold_for_late_heart_rate
+        self._held_at: float | None = None  # a rule update the routine is held at (late heart rate)
+        self._held_wait: tuple[float, float] = (math.nan, 0.0)  # (that rule update, how long it was held)
         self.decisions: list[Decision] = []
 
     # --- public API --------------------------------------------------------------------------
@@ -200,7 +203,10 @@ class ExerciseCoach(Listener):
             self._check_pending(now)
             self._check_unanswered(now)
         self.engine.tick(now)
-        if self.engine.running and self._gesture_next is not None and now >= self._gesture_next:
+        # A routine held at an instant plays nothing due from then on before it goes on (the transition
+        # due then may change the gesture).
+        due = now if self.engine.held_at is None else min(now, self.engine.held_at - 1e-9)
+        if self.engine.running and self._gesture_next is not None and due >= self._gesture_next:
             assert self._gesture is not None  # set with _gesture_next
             self._play_gesture(self._gesture[0], self.ladder.speed, True, "gesture repeat")
 
@@ -561,11 +567,36 @@ class ExerciseCoach(Listener):
             self._emit(event)
             self.say(text, "behaviour: heart-rate report")
 
+    def _hold_for_late_heart_rate(self, t: float) -> float | None:
+        """Hold the routine at a rule update that cannot wait on its own for late heart rate.
+
+        A rule update decides on the heart rate taken before ``t`` and waits for it (``hr_wait``) while
+        the routine goes on, except at the end of the activity: there it must be decided before the
+        transition due at the same instant. So the routine waits there instead (nothing at or after
+        ``t`` runs) until that heart rate has come, ``hr_wait`` at most; the decision and the transition
+        then carry the time ``t``, as they do when the heart rate is on time.
+        """
+        if self.engine.next_hook_due(RULE_UPDATE) != t or self.engine.activity_end > t:
+            return None
+        if not self.monitor.window_complete(t) and self.clock() < t + self.cfg.hr_wait:
+            self._held_at = t
+            return t + self.cfg.hr_wait
+        if self._held_at == t:
+            self._held_wait = (t, self.clock() - t)  # for the decision's "waited"
+        return None
+
+    def _waited(self, t: float) -> float:
+        """How long the rule update at ``t`` waited for late heart rate (the routine held, or not)."""
+        held_t, held = self._held_wait
+        return max(self.engine.now - t, held if held_t == t else 0.0)
+
     def _rule_update(self, t: float) -> None:
         """Decide now, or once the heart rate taken before ``t`` has arrived (``hr_wait``).
 
         The wait ends at the activity's end at the latest, so a decision is always about the
-        activity that ran in its window (hooks run before the transition due at the same instant).
+        activity that ran in its window (hooks run before the transition due at the same instant);
+        at the activity's end itself the routine has waited for the heart rate instead
+        (:meth:`_hold_for_late_heart_rate`).
         """
         deadline = min(t + self.cfg.hr_wait, self.engine.activity_end)
         if deadline <= t or self.monitor.window_complete(t):
@@ -602,7 +633,8 @@ class ExerciseCoach(Listener):
         phase = self.engine.phase
         activity = self.engine.activity
         inputs = {**stats.as_dict(), "window": [self._buffer_since, t],
-                  "waited": round(self.engine.now - t, 6), "phase": phase.name if phase else None,
+                  "waited": round(self._waited(t), 6), "newest_sample": self.monitor.newest_sample,
+                  "hr_clock_offset": self.monitor.clock_offset, "phase": phase.name if phase else None,
                   "phase_kind": phase.kind if phase else None,
                   "activity": activity.name if activity else None,
                   "zone": [self.zone.low, self.zone.high] if self.zone else None,

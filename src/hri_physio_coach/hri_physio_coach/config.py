@@ -112,8 +112,8 @@ class CoachConfig(NodeConfig):
                                   "(session time; a restarting controller, say) is recorded as a "
                                   "command_unanswered event", unit="s", gt=0)
     hr_wait: float = option(3.0, "longest the calibration or a rule update waits for the heart rate taken "
-                            "before it to arrive (a rule update never past its activity's end; 0: decide "
-                            "on what has arrived)",
+                            "before it to arrive (at its activity's end the routine waits with it; 0: "
+                            "decide on what has arrived)",
                             unit="s", ge=0)
     hr_valid_min: float = option(30.0, "lowest plausible heart rate", unit="bpm", gt=0)
     hr_valid_max: float = option(230.0, "highest plausible heart rate", unit="bpm", gt=0)

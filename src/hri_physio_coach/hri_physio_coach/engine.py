@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -117,6 +118,13 @@ class ScenarioEngine:
         self._seq = itertools.count()
         self._activity_timers: list[_Timer] = []
         self._hook_timers: dict[str, _Timer] = {}
+        #: Asked before the first thing due at an instant runs: None to go on, or the time up to which
+        #: nothing at or after that instant may run yet (a scenario waiting for late input it needs
+        #: there). Asked again on every tick until it says None or the time has come.
+        self.gate: Callable[[float], float | None] | None = None
+        self._gate_open_at = -math.inf  # the instant the gate last let through
+        #: The instant the gate holds the engine at since the last tick (None: not held).
+        self.held_at: float | None = None
 
     # --- state -------------------------------------------------------------------------------
     @property
@@ -192,10 +200,20 @@ class ScenarioEngine:
         """Run everything due up to ``now`` (default: the clock); returns how many timers ran."""
         now = self.clock() if now is None else float(now)
         ran = 0
+        self.held_at = None
         while self.state == RUNNING and self._queue and self._queue[0].time <= now + _SAME_TIME:
-            timer = heapq.heappop(self._queue)
-            if timer.cancelled:
+            if self._queue[0].cancelled:
+                heapq.heappop(self._queue)
                 continue
+            at = self._queue[0].time
+            held = self._held_until(at)
+            if held is not None:
+                if now < held - _SAME_TIME:
+                    self.now = max(self.now, at)  # time stands at the held instant
+                    self.held_at = at
+                    return ran
+                self._gate_open_at = at  # waited long enough: that instant runs as it is
+            timer = heapq.heappop(self._queue)
             self.now = max(self.now, timer.time)
             if timer.hook is not None:
                 ran += self._run_hooks(timer)
@@ -214,7 +232,20 @@ class ScenarioEngine:
         """When the next pending timer is due (None: nothing pending), for event-driven drivers."""
         while self._queue and self._queue[0].cancelled:
             heapq.heappop(self._queue)
-        return self._queue[0].time if self.state == RUNNING and self._queue else None
+        if self.state != RUNNING or not self._queue:
+            return None
+        due = self._queue[0].time
+        held = self._held_until(due)
+        return due if held is None else max(due, held)
+
+    def _held_until(self, at: float) -> float | None:
+        """The gate's answer for the instant ``at`` (None: go on), asked until it lets ``at`` through."""
+        if self.gate is None or at <= self._gate_open_at + _SAME_TIME:
+            return None
+        held = self.gate(at)
+        if held is None:
+            self._gate_open_at = at
+        return held
 
     def run_to_end(self, step: float = 1.0, before_tick: Callable[[float], None] | None = None) -> None:
         """Drive the whole session on a fake clock in ``step``-second ticks (tests, simulations)."""

@@ -69,6 +69,8 @@ class ParticipantNodeConfig(NodeConfig):
     command_topic: str = option(topics.QT_COMMANDS, "robot command lines the participant follows",
                                 min_length=1)
     state_topic: str = option(topics.PARTICIPANT_STATE, "the model's true state (JSON, 1 Hz)", min_length=1)
+    heard_topic: str = option(topics.PARTICIPANT_HEARD, "a confirmation (JSON) of each command and audio "
+                              "status taken in: the session launcher holds sim time for it", min_length=1)
     session_events_topic: str = option(topics.COACH_EVENTS, "the coach's events: its 'session_start' starts "
                                        "the seeded session model (until then the person rests on another "
                                        "random stream)", min_length=1)

@@ -4,7 +4,18 @@ from __future__ import annotations
 
 import pytest
 
-from hri_physio_bringup.clock import CLOCK_STEP, DECISION, HR, MEDIA, ROBOT, ClockGuard, SimClock
+from hri_physio_bringup.clock import (
+    CLOCK_STEP,
+    DECISION,
+    HR,
+    MEDIA,
+    ROBOT,
+    UPTAKE,
+    ClockGuard,
+    ClockHistory,
+    SimClock,
+)
+from hri_physio_coach.participant.perception import message_key, parse_receipt, receipt
 
 
 class Wall:
@@ -23,6 +34,20 @@ def test_sim_clock_steps_keep_up_with_the_wall_clock_at_its_speed() -> None:
     assert clock.due_steps() == pytest.approx([1000.0 + CLOCK_STEP * k for k in (1, 2, 3)])
     wall.t += 0.001  # 0.03 s: not a whole step yet
     assert clock.due_steps() == []
+
+
+def test_sim_clock_values_stay_on_the_step_grid_at_epoch_times() -> None:
+    """At ~1.8e9 s every float sum rounds: summed step by step, 1035 steps of 0.1 s end up 1e-4 s short of
+    103.5 s, enough to put an instruction on another 5-s mark than the evaluation's."""
+    wall = Wall()
+    start = 1795747467.0
+    clock = SimClock(start=start, speed=10.0, monotonic=wall)
+    values: list[float] = []
+    for k in range(1035):
+        wall.t = 100.0 + (k + 1) * 0.01 + 1e-9
+        values += clock.due_steps()
+    assert len(values) == 1035
+    assert values[-1] == start + 1035 * CLOCK_STEP and values[-1] - start == 103.5
 
 
 def test_the_sim_clock_says_when_its_next_step_is_due() -> None:
@@ -120,7 +145,7 @@ def test_a_hold_is_given_up_after_max_hold_and_counted() -> None:
     assert guard.limit(61.0) is None and guard.released == {ROBOT: 1, MEDIA: 1}
     clock = SimClock(0.0, 1.0, monotonic=wall)
     assert guard.report(clock) == {"held_wall_s": 0.0, "holds": {ROBOT: 1, MEDIA: 1},
-                                   "released": {ROBOT: 1, MEDIA: 1}}
+                                   "released": {ROBOT: 1, MEDIA: 1}, "late_uptakes": 0}
 
 
 def test_a_limit_less_than_a_step_ahead_holds_the_clock_and_is_given_up_in_time() -> None:
@@ -147,11 +172,12 @@ def test_the_clock_stops_before_a_rule_updates_wait_ends_until_the_coach_has_dec
     wall = Wall()
     guard = ClockGuard(hr_wait=3.0, max_hold=5.0, monotonic=wall)
     guard.coach_decision(540.0)
-    assert guard.limit(530.0) == pytest.approx(542.9) and guard.hard and not guard.holds  # far off: no hold
-    assert guard.limit(542.9) == pytest.approx(542.9) and guard.hard and guard.holds == {DECISION: 1}
+    assert guard.limit(530.0) == pytest.approx(542.9) and guard.stop == pytest.approx(542.9)
+    assert not guard.holds  # far off: no hold
+    assert guard.limit(542.9) == pytest.approx(542.9) and guard.holds == {DECISION: 1}
     clock = SimClock(start=542.9, speed=20.0, monotonic=wall)
     wall.t += 1.0
-    assert clock.due_steps(guard.limit(clock.t), guard.hard) == []  # stopped, not slowed
+    assert clock.due_steps(guard.limit(clock.t), guard.stop) == []  # stopped, not slowed
     guard.coach_decision(570.0)  # decided: the next one is 30 s on
     assert guard.limit(542.9) == pytest.approx(572.9) and guard.holds == {DECISION: 1}
     guard.coach_decision(None)
@@ -206,3 +232,125 @@ def test_a_restarted_streamer_counting_from_zero_again_still_settles_requests() 
     assert guard.limit(30.0) == pytest.approx(31.0)
     guard.media_settled(2)
     assert guard.limit(30.0) is None
+
+
+COMMANDS, STATUS = "/QtController/input", "/audio_streamer/status"
+
+
+def test_the_clock_stops_short_of_a_participants_uptake_until_the_participant_confirms() -> None:
+    """An instruction heard at 120.3 s (session start 5 s, marks every 5 s) is taken up at 125 s if the
+    person hears it by 123.5 s: the clock stops half a step before that until the receipt comes."""
+    wall = Wall()
+    guard = ClockGuard(reaction_period=5.0, max_hold=5.0, monotonic=wall)
+    guard.instruction(COMMANDS, message_key("gesture play rest 0.5"), 3.0)
+    assert guard.limit(3.0) is None  # before the session start: taken up at once, nothing to hold
+    guard.session_started(5.0)
+    line = "gesture play step_up 0.9"
+    guard.instruction(COMMANDS, message_key(line), 120.3)
+    assert guard.limit(120.3) == pytest.approx(123.45) and guard.stop == pytest.approx(123.45)
+    clock = SimClock(start=120.3, speed=10.0, monotonic=wall)
+    wall.t += 1.0  # 10 s due at 10x: the clock stops at 123.4, the last step before 123.45
+    assert clock.due_steps(guard.limit(clock.t), guard.stop)[-1] == pytest.approx(123.4)
+    assert guard.limit(clock.t) == pytest.approx(123.45) and guard.holds == {UPTAKE: 1}
+    wall.t += 1.0
+    assert clock.due_steps(guard.limit(clock.t), guard.stop) == []
+    topic, key, heard_at = parse_receipt(receipt(COMMANDS, line, 123.4))
+    guard.participant_heard(topic, key, heard_at)
+    assert guard.limit(clock.t) is None and guard.stop is None and guard.late_uptakes == 0
+
+
+def test_a_soft_hold_before_an_uptake_lets_the_clock_creep_only_up_to_the_uptakes_stop() -> None:
+    wall = Wall()
+    guard = ClockGuard(reaction_period=5.0, reply_lag=1.0, monotonic=wall)
+    guard.session_started(0.0)
+    guard.command_sent(120.0)  # no reply yet: slowed to real time from 121 s
+    guard.instruction(COMMANDS, message_key("gesture play marching 1.0"), 120.0)
+    clock = SimClock(start=120.0, speed=10.0, monotonic=wall)
+    wall.t += 10.0  # at real time from 121 s, it would reach 130 s: it stops at 123.4
+    steps = clock.due_steps(guard.limit(clock.t), guard.stop)
+    assert steps[-1] == pytest.approx(123.4)
+
+
+def test_a_receipt_heard_before_its_instruction_confirms_it_and_a_late_one_is_counted() -> None:
+    wall = Wall()
+    guard = ClockGuard(reaction_period=5.0, monotonic=wall)
+    guard.session_started(100.0)
+    status = '{"state": "playing", "tempo": 130}'
+    guard.participant_heard(STATUS, message_key(status), 101.0)  # the participant's receipt came first
+    guard.instruction(STATUS, message_key(status), 101.0)
+    assert guard.limit(101.0) is None and guard.late_uptakes == 0
+    # Heard at 110.2 s (mark 115 s) but taken in at 113.6 s: the person takes it up at 120 s.
+    guard.instruction(STATUS, message_key(status), 110.2)
+    guard.participant_heard(STATUS, message_key(status), 113.6)
+    assert guard.limit(113.6) is None and guard.late_uptakes == 1
+    # The same text twice: each receipt confirms one of them.
+    guard.instruction(COMMANDS, message_key("say hi"), 121.0)
+    guard.instruction(COMMANDS, message_key("say hi"), 121.2)
+    guard.participant_heard(COMMANDS, message_key("say hi"), 121.1)
+    assert guard.limit(121.2) == pytest.approx(123.45)
+    guard.participant_heard(COMMANDS, message_key("say hi"), 121.3)
+    assert guard.limit(121.3) is None and guard.late_uptakes == 1
+
+
+def test_a_participant_that_never_confirms_is_given_up_on_after_max_hold() -> None:
+    wall = Wall()
+    guard = ClockGuard(reaction_period=5.0, max_hold=5.0, monotonic=wall)
+    guard.session_started(0.0)
+    guard.instruction(COMMANDS, message_key("gesture play rest 0.5"), 20.0)
+    assert guard.limit(23.45) == pytest.approx(23.45) and guard.holds == {UPTAKE: 1}
+    wall.t += 6.0
+    assert guard.limit(23.45) is None and guard.released == {UPTAKE: 1}
+
+
+def test_no_uptake_is_waited_for_without_a_participant_or_with_one_that_reacts_at_once() -> None:
+    guard = ClockGuard(reaction_period=0.0, monotonic=Wall())
+    guard.session_started(0.0)
+    guard.instruction(COMMANDS, message_key("gesture play rest 0.5"), 20.0)
+    assert guard.limit(20.0) is None
+
+
+@pytest.mark.parametrize("text", ["", "[]", '{"topic": "/x", "key": "1", "t": 2.0}',
+                                  '{"topic": "/x", "key": 1, "t": NaN}',
+                                  '{"topic": "/x", "key": true, "t": 1}', '{"key": 1, "t": 1.0}'])
+def test_what_is_not_a_receipt_is_said_so(text: str) -> None:
+    assert parse_receipt(text) is None
+
+
+def test_a_receipt_for_an_instruction_before_the_session_confirms_nothing_later() -> None:
+    """The same status text before and after the session start: the early one's receipt must not
+    stand in for the later one's (the clock would run on without the participant having heard it)."""
+    wall = Wall()
+    guard = ClockGuard(reaction_period=5.0, max_hold=5.0, monotonic=wall)
+    status = '{"state": "playing", "tempo": 120}'
+    guard.instruction(STATUS, message_key(status), 10.0)  # before the session: nothing to hold for
+    assert guard.limit(10.0) is None
+    guard.participant_heard(STATUS, message_key(status), 10.0)
+    guard.session_started(30.0)
+    guard.instruction(STATUS, message_key(status), 40.2)
+    assert guard.limit(40.2) == pytest.approx(43.45)
+    guard.participant_heard(STATUS, message_key(status), 40.3)
+    assert guard.limit(40.3) is None and guard.late_uptakes == 0
+
+
+def test_receipts_and_instructions_never_matched_are_forgotten_after_max_hold() -> None:
+    wall = Wall()
+    guard = ClockGuard(reaction_period=5.0, max_hold=5.0, monotonic=wall)
+    guard.participant_heard(COMMANDS, message_key("say hello"), 5.0)  # for a command the launcher missed
+    guard.instruction(COMMANDS, message_key("say bye"), 5.0)  # the participant missed it, before the session
+    wall.t += 6.0
+    guard.session_started(10.0)
+    guard.instruction(COMMANDS, message_key("say hello"), 20.0)  # the old receipt does not confirm it
+    assert guard.limit(20.0) == pytest.approx(23.45)
+    guard.participant_heard(COMMANDS, message_key("say bye"), 20.5)  # nor does a new one for the forgotten
+    assert guard.limit(20.5) == pytest.approx(23.45)
+
+
+def test_the_clock_history_dates_a_message_by_the_value_that_was_newest_when_it_went_out() -> None:
+    history = ClockHistory(size=3)
+    assert history.at(1_000) is None
+    for k in range(4):  # 100.0 at 1000 ns, 100.1 at 2000 ns, ...; the first falls out
+        history.published(1_000 * (k + 1), 100.0 + k / 10)
+    assert history.at(3_500) == pytest.approx(100.2)
+    assert history.at(2_000) == pytest.approx(100.1)
+    assert history.at(9_999) == pytest.approx(100.3)
+    assert history.at(1_500) is None  # older than what is kept: the caller uses its own clock

@@ -15,6 +15,7 @@ import pytest
 
 from helpers import NodeProcess, own_lines, resolve_lsl, wait_until
 from hri_physio_bridge import topics
+from hri_physio_coach.participant.perception import message_key, parse_receipt
 
 pytestmark = [pytest.mark.ros, pytest.mark.lsl]
 
@@ -92,8 +93,16 @@ def test_the_participant_streams_on_lsl_and_follows_the_robot(ros_context: Any, 
         with lock:
             states.append(json.loads(msg.data))
 
+    receipts: list[tuple[str, int, float]] = []
+
+    def on_receipt(msg: String) -> None:
+        with lock:
+            receipts.append(parse_receipt(msg.data))
+
     node.create_subscription(String, topics.PARTICIPANT_STATE, on_state, 100)
+    node.create_subscription(String, topics.PARTICIPANT_HEARD, on_receipt, 100)
     commands = node.create_publisher(String, topics.QT_COMMANDS, command_qos())
+    statuses = node.create_publisher(String, topics.AUDIO_STATUS, event_qos())
     events = node.create_publisher(String, topics.COACH_EVENTS, event_qos())
     spinner = ExecutorThread(node, context=ros_context)
     try:
@@ -115,6 +124,17 @@ def test_the_participant_streams_on_lsl_and_follows_the_robot(ros_context: Any, 
             wait_until(lambda: (latest()["activity"], latest()["tempo_bpm"]) == ("marching", 130.0), 30,
                        lambda: f"marching at 130 BPM; last state {latest()}")
             assert latest()["gesture_speed"] == 1.05
+            # Each command taken in is confirmed (the launcher's clock guard waits for it), also a status
+            # the person cannot read: the guard must not wait for it forever.
+            wait_until(lambda: statuses.get_subscription_count() >= 1, 30, "the participant on the status")
+            statuses.publish(String(data="not json"))
+            wait_until(lambda: len(receipts) >= 3, 30, lambda: f"three receipts; got {receipts}")
+            with lock:
+                assert [(topic, key) for topic, key, _t in receipts] == [
+                    (topics.QT_COMMANDS, message_key("set gesture marching 1.05")),
+                    (topics.QT_COMMANDS, message_key("set audio ./audio/exercise_130.wav")),
+                    (topics.AUDIO_STATUS, message_key("not json"))]
+                assert all(t > 0 for _topic, _key, t in receipts)  # taken in at the participant's ROS time
             # The coach's session start: the seeded model takes over on a whole second from then.
             assert latest()["session_model_t0"] is None
             start = latest()["t"]

@@ -96,6 +96,39 @@ def test_tick_granularity_does_not_change_anything(step: float) -> None:
     assert rec.log == EXPECTED
 
 
+def test_a_gate_holds_an_instant_and_everything_after_it_until_it_opens_or_its_time_comes() -> None:
+    """The hook and the transition due at 10 s wait for the gate; when they run they carry 10 s."""
+    engine, rec = make()
+    ready = {"at": None}
+
+    def gate(t: float) -> float | None:
+        return None if t != 10.0 or ready["at"] is not None else 13.0
+
+    engine.gate = gate
+    engine.start(0.0)
+    engine.tick(11.5)
+    assert rec.log == EXPECTED[:EXPECTED.index((10, "hook:fast"))]
+    assert engine.now == 10.0 and engine.held_at == 10.0  # time stands at the held instant
+    assert engine.next_due() == 13.0  # the latest the gate holds it: a driver wakes then (or sooner)
+    ready["at"] = 11.8
+    engine.tick(11.8)
+    assert engine.held_at is None and engine.now == 11.8
+    engine.tick(100.0)
+    assert rec.log == EXPECTED  # every time as without the gate
+
+
+def test_a_gate_that_never_opens_holds_until_the_time_it_names() -> None:
+    engine, rec = make()
+    engine.gate = lambda t: 13.0 if t == 10.0 else None
+    engine.start(0.0)
+    engine.tick(12.9)
+    assert engine.held_at == 10.0 and (10, "hook:fast") not in rec.log
+    engine.tick(13.0)
+    assert engine.held_at is None
+    engine.tick(100.0)
+    assert rec.log == EXPECTED
+
+
 def test_events_describe_the_session() -> None:
     engine, rec = make()
     engine.start(1000.0)  # any start time: everything is relative to it

@@ -6,7 +6,8 @@ until a status arrives, e.g. with no streamer running, the tempo named in ``set 
 runs the heart-rate model of docs/PARTICIPANT_MODEL.md on ROS time (so it follows /clock under
 use_sim_time), and streams what a Polar H10 would: ECG (130 Hz), HR (1 Hz) and RR intervals
 on LSL, named ``[<name_prefix>/]PolarH10/<device_id>/<ECG|HR|RR>``. Its true model state goes
-to /participant/state (JSON) for evaluation.
+to /participant/state (JSON) for evaluation; each command and audio status it took in is confirmed
+on /participant/heard (JSON: topic, key, when), which the session launcher's clock guard waits for.
 
 Until the coach's ``session_start`` on /coach/events the person rests on a separate random
 stream; from then the model runs from its seed as ``hri_physio_evaluate`` runs it
@@ -35,7 +36,7 @@ from hri_physio_bridge.node_runner import ManagedNode, run_node
 from hri_physio_bridge.qos import command_qos, event_qos
 from hri_physio_bridge.streamers.base import StreamerError, StreamSpec
 from hri_physio_bridge.streamers.lsl import LslStreamer
-from hri_physio_coach.participant.perception import RobotObserver
+from hri_physio_coach.participant.perception import RobotObserver, receipt
 from hri_physio_coach.participant.physiology import takes_effect
 from hri_physio_coach.participant.stream import StrapStream, strap_start
 from hri_physio_coach.participant_config import PARTICIPANT_NODE, ParticipantNodeConfig
@@ -69,6 +70,7 @@ class SimulatedParticipantNode(ManagedNode):
             self.close()
             raise
         self.state_pub = self.create_publisher(String, cfg.state_topic, event_qos(100))
+        self.heard_pub = self.create_publisher(String, cfg.heard_topic, event_qos(100))
         self.create_subscription(String, cfg.command_topic, self._on_command, command_qos())
         self.create_subscription(String, cfg.audio_status_topic, self._on_audio_status, event_qos())
         self.create_subscription(String, cfg.session_events_topic, self._on_coach_event, event_qos())
@@ -119,6 +121,10 @@ class SimulatedParticipantNode(ManagedNode):
             else:
                 self.get_logger().info("another session_start: the model keeps running (one per participant)")
 
+    def _confirm(self, topic: str, msg: String) -> None:
+        """Say that ``msg`` was taken in, and when (the launcher's clock guard waits for it)."""
+        self.heard_pub.publish(String(data=receipt(topic, msg.data, self._now())))
+
     def _on_command(self, msg: String) -> None:
         with self._lock:
             changed = self.observer.observe(msg.data)
@@ -129,8 +135,15 @@ class SimulatedParticipantNode(ManagedNode):
                                        "the music tempo follows the 'set audio' commands")
             if changed:
                 self._apply_activity()
+        self._confirm(self.config.command_topic, msg)
 
     def _on_audio_status(self, msg: String) -> None:
+        try:
+            self._follow_audio_status(msg)
+        finally:
+            self._confirm(self.config.audio_status_topic, msg)
+
+    def _follow_audio_status(self, msg: String) -> None:
         try:
             status = json.loads(msg.data)
         except ValueError:

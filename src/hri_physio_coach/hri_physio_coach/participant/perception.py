@@ -9,6 +9,9 @@ been heard (no streamer running, e.g. a participant started alone) the tempo com
 
 from __future__ import annotations
 
+import json
+import math
+import zlib
 from collections.abc import Mapping
 from typing import Any
 
@@ -75,3 +78,31 @@ class RobotObserver:
             return False
         self.activity = self.activity.with_(tempo_bpm=tempo)
         return True
+
+
+def message_key(data: str) -> int:
+    """A key of one message the participant follows, the same in every process (its CRC-32)."""
+    return zlib.crc32(data.encode("utf-8", "surrogatepass"))
+
+
+def receipt(topic: str, data: str, heard_at: float) -> str:
+    """The participant's confirmation (JSON) that it took in ``data`` from ``topic`` at ``heard_at``.
+
+    The session launcher holds its sim clock until the confirmation of each instruction comes (the
+    clock guard): the instruction is then taken up on the same mark on any machine.
+    """
+    return json.dumps({"topic": topic, "key": message_key(data), "t": heard_at})
+
+
+def parse_receipt(text: str) -> tuple[str, int, float] | None:
+    """(topic, key, heard_at) of a :func:`receipt`, or None when ``text`` is not one."""
+    try:
+        data = json.loads(text)
+        topic, key, heard_at = data["topic"], data["key"], data["t"]
+    except (ValueError, TypeError, KeyError):
+        return None
+    if not (isinstance(topic, str) and isinstance(key, int) and isinstance(heard_at, int | float)):
+        return None
+    if isinstance(key, bool) or isinstance(heard_at, bool) or not math.isfinite(heard_at):
+        return None
+    return topic, key, float(heard_at)

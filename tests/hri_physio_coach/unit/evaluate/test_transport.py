@@ -53,12 +53,40 @@ def test_without_waiting_the_stalled_samples_miss_their_window(prompt: SessionRu
     assert late["inputs"]["hr_mean"] != pytest.approx(ref["inputs"]["hr_mean"], abs=0.05)
 
 
-def test_a_rule_update_at_an_activity_end_does_not_wait_into_the_next_activity(prompt: SessionRun) -> None:
+def test_at_an_activity_end_the_routine_waits_for_the_heart_rate_and_decides_before_the_transition(
+        prompt: SessionRun) -> None:
+    """A rule update at an activity's end must be decided before the transition due then: the routine is
+    held there (nothing at or after it runs) until the stalled samples come, and the decision and the
+    next activity carry the times they carry when the heart rate is on time."""
     run = simulate_session(replace(SPEC, hr_stalls=stalled_before(AT_BOUNDARY)), coach())
+    at_end, ref = rule(run, AT_BOUNDARY), rule(prompt, AT_BOUNDARY)
+    assert at_end["inputs"]["waited"] == pytest.approx(0.6)  # until the stalled samples came
+    assert at_end["inputs"]["activity"] == ref["inputs"]["activity"] == "basic_marching"
+    assert at_end["inputs"]["n_valid"] == ref["inputs"]["n_valid"] == 30
+    assert at_end["inputs"]["hr_mean"] == ref["inputs"]["hr_mean"]
+    assert at_end["decision"] == ref["decision"]
+
+    def next_activity(r: SessionRun) -> dict:
+        return next(e for e in r.events if e["event"] == "activity" and e["t"] >= AT_BOUNDARY)
+
+    assert next_activity(run) == next_activity(prompt)
+    def then(r: SessionRun) -> list[str]:
+        return [e["event"] for e in r.events if e["t"] == AT_BOUNDARY]
+
+    assert then(run).index("rule_update") < then(run).index("activity")
+    assert then(prompt).index("rule_update") < then(prompt).index("activity")
+
+
+def test_a_routine_held_at_an_activity_end_goes_on_after_hr_wait_without_the_heart_rate(
+        prompt: SessionRun) -> None:
+    stall = ((AT_BOUNDARY - 2.5, AT_BOUNDARY + 10.0),)  # longer than the wait
+    run = simulate_session(replace(SPEC, hr_stalls=stall), coach(hr_wait=2.0))
     at_end = rule(run, AT_BOUNDARY)
-    assert at_end["inputs"]["waited"] == 0.0
-    assert at_end["inputs"]["activity"] == rule(prompt, AT_BOUNDARY)["inputs"]["activity"] == "basic_marching"
+    assert at_end["inputs"]["waited"] == pytest.approx(2.0)
     assert at_end["inputs"]["n_valid"] < 30
+    assert at_end["inputs"]["activity"] == "basic_marching"
+    following = next(e for e in run.events if e["event"] == "activity" and e["t"] >= AT_BOUNDARY)
+    assert following["t"] == AT_BOUNDARY
 
 
 def test_a_wait_is_bounded_by_hr_wait(prompt: SessionRun) -> None:
