@@ -181,7 +181,6 @@ class InFlight:
             self._settled += 1
 
 
-
 @dataclass
 class _Instruction:
     sent: float  # sim time the launcher heard it go out
@@ -291,6 +290,9 @@ class ClockGuard:
     _since: float = 0.0
     _stop: float | None = None
 
+    def __post_init__(self) -> None:
+        self._uptakes = Uptakes(self.reaction_period, self.max_hold, self.monotonic)
+
     # --- what the loop did ---------------------------------------------------------------------
     def hr_sample(self, source_t: float, sim_now: float) -> None:
         """A strap heart-rate sample came through, stamped ``source_t``, at sim time ``sim_now``."""
@@ -318,9 +320,6 @@ class ClockGuard:
     def media_settled(self, settled: int) -> None:
         """The streamer's status: ``settled`` requests started, failed or superseded so far."""
         self._media.answered(total=settled)
-
-    def __post_init__(self) -> None:
-        self._uptakes = Uptakes(self.reaction_period, self.max_hold, self.monotonic)
 
     @property
     def late_uptakes(self) -> int:

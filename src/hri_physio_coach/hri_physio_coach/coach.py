@@ -59,6 +59,8 @@ from qt_controller.gestures import GestureError, GestureLibrary, default_gesture
 CALIBRATION = "calibration"
 RULE_UPDATE, BEHAVIOUR, REMINDER, FACE = "rule_update", "behaviour", "reminder", "encouragement"
 BEHAVIOURS = ("motivation", "emotion", "hr_report")
+#: Two engine times this close (s) are one instant.
+SAME_INSTANT = 1e-6
 
 _STRING_VARS = ("name", "video", "gesture", "label", "routine_label", "activity", "phase", "splash", "music",
                 "relaxing_audio", "relaxing_video", "relaxing_gesture", "minutes_word")
@@ -576,7 +578,9 @@ class ExerciseCoach(Listener):
         ``t`` runs) until that heart rate has come, ``hr_wait`` at most; the decision and the transition
         then carry the time ``t``, as they do when the heart rate is on time.
         """
-        if self.engine.next_hook_due(RULE_UPDATE) != t or self.engine.activity_end > t:
+        due = self.engine.next_hook_due(RULE_UPDATE)
+        # Sums of seconds at epoch times: equal to a few float steps (2.4e-7 s at 1.8e9 s).
+        if due is None or abs(due - t) > SAME_INSTANT or self.engine.activity_end > t + SAME_INSTANT:
             return None
         if not self.monitor.window_complete(t) and self.clock() < t + self.cfg.hr_wait:
             self._held_at = t
