@@ -359,8 +359,7 @@ def run_node(
             finally:
                 if spinner is not None:
                     spinner.close()
-                node.destroy_node()
-        ended = shut_down_ros()
+        ended = shut_down_ros(node)
     if not ended:
         # The node's work is done and written; only the middleware's teardown is stuck.
         print(f"{prog}: warning: the ROS 2 middleware did not shut down within {TEARDOWN_TIMEOUT:g} s; "
@@ -373,24 +372,29 @@ def run_node(
 TEARDOWN_TIMEOUT = 5.0
 
 
-def shut_down_ros(timeout: float = TEARDOWN_TIMEOUT) -> bool:
-    """Shut rclpy down and destroy its context (the DDS participant); False if that did not end in time.
+def shut_down_ros(node: Any = None, timeout: float | None = None) -> bool:
+    """Destroy ``node``, shut rclpy down and destroy its context (the DDS participant); False if that
+    did not end in time (``TEARDOWN_TIMEOUT``).
 
     Left to the interpreter's exit, the participant is deleted by C++ destructors after Python's
-    own shutdown, where a hang shows no Python stack and outlasts the launcher's grace. Here it
-    runs on a thread of its own, so a hang is bounded and said.
+    own shutdown, where a hang shows no Python stack and outlasts the launcher's grace. Destroying
+    a node's publishers can hang as well (Fast DDS deleting a reliable writer whose reader's process
+    was killed: seen once on a loaded machine, mock_qt_robot after its controller's SIGKILL). Here
+    it all runs on a thread of its own, so a hang is bounded and said.
     """
     done = threading.Event()
 
     def teardown() -> None:
         try:
+            if node is not None:
+                node.destroy_node()
             rclpy.try_shutdown()
             rclpy.get_default_context().destroy()
         finally:
             done.set()
 
     threading.Thread(target=teardown, name="ros-teardown", daemon=True).start()
-    return done.wait(timeout)
+    return done.wait(TEARDOWN_TIMEOUT if timeout is None else timeout)
 
 
 def exit_now(code: int) -> None:

@@ -72,11 +72,14 @@ class Node(node_runner.ManagedNode):
 if sys.argv[1] == "hang":
     node_runner.TEARDOWN_TIMEOUT = 0.5
     rclpy.try_shutdown = lambda: time.sleep(3600)  # a middleware teardown that never ends
+elif sys.argv[1] == "hang_destroying_the_node":
+    node_runner.TEARDOWN_TIMEOUT = 0.5
+    Node.destroy_node = lambda self: time.sleep(3600)  # a writer's deletion that never ends
 sys.exit(node_runner.run_node("teardown_test", Options, Node, argv=sys.argv[2:]))
 """
 
 
-@pytest.mark.parametrize("mode", ["hang", "normal"])
+@pytest.mark.parametrize("mode", ["hang", "hang_destroying_the_node", "normal"])
 def test_a_stuck_middleware_teardown_is_bounded_and_keeps_the_exit_status(mode: str, tmp_path) -> None:
     import subprocess
     import sys
@@ -89,7 +92,7 @@ def test_a_stuck_middleware_teardown_is_bounded_and_keeps_the_exit_status(mode: 
     assert done.stdout == "worked\n"
     said = ("teardown_test: warning: the ROS 2 middleware did not shut down within 0.5 s; "
             "exiting with status 4")
-    assert (said in done.stderr) == (mode == "hang"), done.stderr
+    assert (said in done.stderr) == (mode != "normal"), done.stderr
 
 
 def test_the_executor_thread_waits_without_polling_and_close_wakes_it(ros_context: Any) -> None:
