@@ -12,8 +12,9 @@ faster than real life, where every node keeps up) while the loop lags behind it:
 * robot commands: never more than ``reply_lag`` past a command the controller has not answered yet;
 * music: never more than ``reply_lag`` past an audio request the streamer has not settled yet (what
   the person follows is the streamer's status);
-* the coach's rule updates: never up to the end of a rule update's wait for late heart rate
-  (``hr_wait``) before the coach has decided it (its ``/coach/state`` says which one is next). Here
+* the coach's rule updates: never past a rule update's time before the coach has reached it, and
+  never up to the end of its wait for late heart rate (``hr_wait``) before the coach has decided it
+  (its ``/coach/state`` says which one is next and whether it waits for heart rate). Here
   the clock stops rather than slows: a coach process starved for a moment would otherwise handle a
   burst of ``/clock`` before the heart rate queued behind it, and decide without it;
 * a simulated participant's uptake: a robot command or an audio status heard by the launcher after
@@ -280,6 +281,7 @@ class ClockGuard:
     hr_wait: float = 3.0  # the coach's wait for late heart rate at a rule update (its option)
     _decision: float | None = None  # the coach's next rule update not decided yet
     _released_decision: float | None = None
+    _decision_waiting: bool = True
     _commands: InFlight = field(default_factory=InFlight)  # robot commands and the controller's replies
     _media: InFlight = field(default_factory=InFlight)  # audio requests and the streamer's settled count
     #: The simulated participant's ``reaction_period`` (0: no participant to wait for, or one that
@@ -313,9 +315,11 @@ class ClockGuard:
         if math.isfinite(sim_now):
             self._media.sent(sim_now)
 
-    def coach_decision(self, next_decision: float | None) -> None:
-        """The coach's state: the time of its next rule update not decided yet (None: none ahead)."""
+    def coach_decision(self, next_decision: float | None, waiting: bool = True) -> None:
+        """The coach's state: the time of its next rule update not decided yet (None: none ahead), and
+        whether it has reached it and ``waiting`` for the heart rate taken before it."""
         self._decision = next_decision
+        self._decision_waiting = waiting
 
     def media_settled(self, settled: int) -> None:
         """The streamer's status: ``settled`` requests started, failed or superseded so far."""
@@ -348,7 +352,11 @@ class ClockGuard:
             if oldest is not None:
                 out[cause] = oldest + self.reply_lag
         if self._decision is not None and self._decision != self._released_decision:
-            out[DECISION] = self._decision + self.hr_wait - CLOCK_STEP
+            # Not reached yet: no further than the decision's own time, so a coach slowed down (say,
+            # loading a policy's library the first time) decides there and sends what it decides in
+            # time for the person's next mark; reached and waiting: up to the end of its wait.
+            wait = self.hr_wait - CLOCK_STEP if self._decision_waiting else CLOCK_STEP / 2
+            out[DECISION] = self._decision + wait
         deadline = self._uptakes.deadline()
         if deadline is not None:
             out[UPTAKE] = deadline

@@ -179,7 +179,8 @@ class ClockAndWatcher(BackgroundNode):
             view.state = data
             if guard is not None:
                 decision = data.get("next_decision")
-                guard.coach_decision(float(decision) if isinstance(decision, int | float) else None)
+                guard.coach_decision(float(decision) if isinstance(decision, int | float) else None,
+                                     bool(data.get("waiting_for_hr", True)))
 
         def set_model(data: dict) -> None:
             view.model_hr = float(data.get("hr_model", math.nan))

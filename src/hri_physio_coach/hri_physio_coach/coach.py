@@ -249,7 +249,13 @@ class ExerciseCoach(Listener):
             "performing": self.choice.current.name if self.choice.current else None,
             "activity_level": self.adapter.level,
             "next_decision": self.next_decision(),
+            "waiting_for_hr": self.waiting_for_heart_rate(),
         }
+
+    def waiting_for_heart_rate(self) -> bool:
+        """Whether the next decision's time has come and it waits for heart rate taken before it."""
+        return (self._pending_rule is not None or self._pending_calibration is not None
+                or self.engine.held_at is not None)
 
     def next_decision(self) -> float | None:
         """The time of the next calibration or rule update not decided yet (one waiting for late heart

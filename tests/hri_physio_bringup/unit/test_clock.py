@@ -184,6 +184,23 @@ def test_the_clock_stops_before_a_rule_updates_wait_ends_until_the_coach_has_dec
     assert guard.limit(542.9) is None
 
 
+def test_the_clock_stops_at_a_rule_update_the_coach_has_not_reached_and_runs_on_while_it_waits() -> None:
+    """A coach slowed down for a moment (a library loaded the first time it is needed) decides at the
+    rule update's own time, not up to hr_wait later: what it sends then still reaches the person
+    before the next mark."""
+    wall = Wall()
+    guard = ClockGuard(hr_wait=3.0, max_hold=5.0, monotonic=wall)
+    guard.coach_decision(120.0, waiting=False)
+    assert guard.limit(119.0) == pytest.approx(120.05) and guard.stop == pytest.approx(120.05)
+    clock = SimClock(start=119.0, speed=10.0, monotonic=wall)
+    wall.t += 1.0
+    assert clock.due_steps(guard.limit(clock.t), guard.stop)[-1] == pytest.approx(120.0)
+    guard.coach_decision(120.0, waiting=True)  # reached: it waits for late heart rate
+    assert guard.limit(clock.t) == pytest.approx(122.9)
+    guard.coach_decision(150.0, waiting=False)  # decided
+    assert guard.limit(clock.t) == pytest.approx(150.05)
+
+
 def test_a_coach_that_never_decides_is_given_up_on_after_max_hold() -> None:
     wall = Wall()
     guard = ClockGuard(hr_wait=3.0, max_hold=5.0, monotonic=wall)

@@ -72,6 +72,7 @@ class QtPhysioCoachNode(ManagedNode):
         self._lock = threading.RLock()
         self._wake = threading.Event()
         self._state_dirty = True
+        self._waiting_said = False  # the coach's waiting_for_hr, as last published
         self.conflict: dict[str, Any] | None = None
         self._control_log = RateLimitedLog(self.get_logger().warning)
         self._own_events = EchoFilter()
@@ -246,6 +247,9 @@ class QtPhysioCoachNode(ManagedNode):
                 self.control.tick(self._now())
                 if self.control.finished:
                     self._finish()
+            waiting = self.coach.waiting_for_heart_rate()
+            if waiting != self._waiting_said:  # a launcher driving sim time lets the clock on for it
+                self._waiting_said, self._state_dirty = waiting, True
             if self._state_dirty:
                 self._publish_state()
 
