@@ -352,9 +352,9 @@ class ClockGuard:
             if oldest is not None:
                 out[cause] = oldest + self.reply_lag
         if self._decision is not None and self._decision != self._released_decision:
-            # Not reached yet: no further than the decision's own time, so a coach slowed down (say,
-            # loading a policy's library the first time) decides there and sends what it decides in
-            # time for the person's next mark; reached and waiting: up to the end of its wait.
+            # Not reached yet: no further than the decision's own time, so a coach slowed down (say, by
+            # the predictive policy's first plan, a second of CPU) decides there and sends what it
+            # decides in time for the person's next mark; reached and waiting: up to the end of its wait.
             wait = self.hr_wait - CLOCK_STEP if self._decision_waiting else CLOCK_STEP / 2
             out[DECISION] = self._decision + wait
         deadline = self._uptakes.deadline()

@@ -185,7 +185,7 @@ def test_the_clock_stops_before_a_rule_updates_wait_ends_until_the_coach_has_dec
 
 
 def test_the_clock_stops_at_a_rule_update_the_coach_has_not_reached_and_runs_on_while_it_waits() -> None:
-    """A coach slowed down for a moment (a library loaded the first time it is needed) decides at the
+    """A coach slowed down for a moment (the predictive policy's first plan) decides at the
     rule update's own time, not up to hr_wait later: what it sends then still reaches the person
     before the next mark."""
     wall = Wall()
