@@ -121,7 +121,8 @@ class NodeProcess:
         return Path(self.log_file.name).read_text(errors="replace")
 
     def wait_for_output(self, text: str, timeout: float = 20.0) -> None:
-        wait_until(lambda: text in self.output or self.proc.poll() is not None, timeout, repr(text))
+        wait_until(lambda: text in self.output or self.proc.poll() is not None, timeout,
+                   lambda: f"{text!r}; its output so far:\n{self.output[-4000:]}")
         assert text in self.output, f"process exited before printing {text!r}:\n{self.output}"
 
     def stop(self, sig: int = signal.SIGTERM, timeout: float = 15.0) -> int:
