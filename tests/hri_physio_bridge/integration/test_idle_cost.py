@@ -15,9 +15,12 @@ mock_qt_robot cost 4 % of a core alone, more than 500 requests' worth).
 
 from __future__ import annotations
 
+import functools
 import os
 import re
 import time
+from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -60,51 +63,91 @@ def wakeups(pid: int) -> int:
     return total
 
 
-@pytest.mark.parametrize("name", sorted(NODES))
-def test_a_node_left_alone_costs_next_to_nothing(name: str, ros_context) -> None:
+@dataclass
+class IdleCost:
+    wall: float
+    alone: float  # CPU seconds over ``wall`` with nothing to do
+    woke: int
+    per_request: float  # CPU seconds per parameter request answered
+
+    def said(self, name: str) -> str:
+        return (f"{name} alone for {self.wall:.1f} s: {self.alone * 1e3:.0f} ms of CPU "
+                f"({self.alone / self.wall:.1%} of a core), {self.woke / self.wall:.0f} wake-ups/s; "
+                f"a parameter request costs it {self.per_request * 1e3:.2f} ms")
+
+
+def _settled(pids: list[int]) -> None:
+    """Start-up over: no more than 2 % of a core in a whole second, each (or 30 s gone, and it counts)."""
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        before = [cpu_seconds(pid) for pid in pids]
+        time.sleep(1.0)
+        if all(cpu_seconds(pid) - b <= BUDGET for pid, b in zip(pids, before, strict=True)):
+            return
+
+
+@pytest.fixture(scope="module")
+def idle_costs() -> Iterator[dict[str, IdleCost]]:
+    """Every node started at once and measured over the same 10 s alone (they share nothing: each
+    node's CPU time is its own process's), then each answers its requests in turn."""
+    import rclpy
     from rcl_interfaces.srv import GetParameters
     from rclpy.node import Node
 
     from hri_physio_bridge.ros_tools import ExecutorThread
 
-    script, *args = NODES[name]
-    node = Node("idle_cost_probe", context=ros_context)
-    spinner = ExecutorThread(node, context=ros_context)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = Node("idle_cost_probe", context=context)
+    spinner = ExecutorThread(node, context=context)
+    procs = {name: NodeProcess(script, *args) for name, (script, *args) in NODES.items()}
     try:
-        with NodeProcess(script, *args) as proc:
-            client = node.create_client(GetParameters, f"/{name}/get_parameters")
+        clients = {name: node.create_client(GetParameters, f"/{name}/get_parameters") for name in NODES}
 
-            def ask() -> None:
-                future = client.call_async(GetParameters.Request(names=["use_sim_time"]))
-                wait_until(future.done, 30, lambda: f"an answer from {name}:\n{proc.output}", period=0.001)
+        def ask(name: str) -> None:
+            future = clients[name].call_async(GetParameters.Request(names=["use_sim_time"]))
+            wait_until(future.done, 30, lambda: f"an answer from {name}:\n{procs[name].output}", period=0.001)
 
-            wait_until(lambda: client.service_is_ready() or proc.proc.poll() is not None, 60,
-                       lambda: f"{name}'s parameter service:\n{proc.output}")
+        def ready(name: str) -> bool:
+            return clients[name].service_is_ready() or procs[name].proc.poll() is not None
+
+        for name, proc in procs.items():
+            wait_until(functools.partial(ready, name), 60, f"{name}'s parameter service")
             assert proc.proc.poll() is None, proc.output
-            ask()
-            pid = proc.proc.pid
-            # Start-up over: no more than 2 % of a core in a whole second (or 30 s gone, and it counts).
-            deadline = time.monotonic() + 30
-            while time.monotonic() < deadline:
-                before = cpu_seconds(pid)
-                time.sleep(1.0)
-                if cpu_seconds(pid) - before <= BUDGET:
-                    break
+            ask(name)
+        pids = {name: proc.proc.pid for name, proc in procs.items()}
+        _settled(list(pids.values()))
 
-            cpu0, woke0, t0 = cpu_seconds(pid), wakeups(pid), time.monotonic()
-            time.sleep(ALONE_S)
-            alone, woke, wall = cpu_seconds(pid) - cpu0, wakeups(pid) - woke0, time.monotonic() - t0
+        cpu0 = {name: cpu_seconds(pid) for name, pid in pids.items()}
+        woke0 = {name: wakeups(pid) for name, pid in pids.items()}
+        t0 = time.monotonic()
+        time.sleep(ALONE_S)
+        alone = {name: cpu_seconds(pid) - cpu0[name] for name, pid in pids.items()}
+        woke = {name: wakeups(pid) - woke0[name] for name, pid in pids.items()}
+        wall = time.monotonic() - t0
 
-            cpu0 = cpu_seconds(pid)
+        costs = {}
+        for name, pid in pids.items():
+            before = cpu_seconds(pid)
             for _ in range(REQUESTS):
-                ask()
-            per_request = (cpu_seconds(pid) - cpu0) / REQUESTS
-            assert proc.proc.poll() is None, proc.output
+                ask(name)
+            per_request = (cpu_seconds(pid) - before) / REQUESTS
+            assert procs[name].proc.poll() is None, procs[name].output
+            costs[name] = IdleCost(wall, alone[name], woke[name], per_request)
+        for proc in procs.values():
             proc.stop()
+        yield costs
     finally:
+        for proc in procs.values():
+            proc.__exit__(None, None, None)
         spinner.close()
         node.destroy_node()
-    said = (f"{name} alone for {wall:.1f} s: {alone * 1e3:.0f} ms of CPU ({alone / wall:.1%} of a core), "
-            f"{woke / wall:.0f} wake-ups/s; a parameter request costs it {per_request * 1e3:.2f} ms")
-    print(said)
-    assert alone <= BUDGET * wall or alone <= REQUESTS_WORTH * per_request, said
+        rclpy.shutdown(context=context)
+
+
+@pytest.mark.parametrize("name", sorted(NODES))
+def test_a_node_left_alone_costs_next_to_nothing(name: str, idle_costs: dict[str, IdleCost]) -> None:
+    cost = idle_costs[name]
+    print(cost.said(name))
+    said = cost.said(name)
+    assert cost.alone <= BUDGET * cost.wall or cost.alone <= REQUESTS_WORTH * cost.per_request, said

@@ -23,7 +23,7 @@ from helpers.routines import FOUR_AND_A_HALF_MINUTES, short_routine
 from helpers.session_bags import RECEIVERS, bag_messages, check_counter, failed_nodes_logs, session_folder
 from hri_physio_bridge import topics
 
-pytestmark = pytest.mark.ros
+pytestmark = [pytest.mark.ros, pytest.mark.session]
 
 SEED = 2026
 RESTARTABLE = ["qt_controller", "mock_qt_robot", "audio_streamer", "video_streamer", "hr_receiver",

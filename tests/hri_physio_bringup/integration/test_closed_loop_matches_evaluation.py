@@ -53,7 +53,7 @@ from hri_physio_coach.evaluate.simulation import SessionSpec, simulate_session
 from hri_physio_coach.participant_config import PARTICIPANT_NODE, ParticipantNodeConfig
 from hri_physio_coach.report.bagdata import read_bag
 
-pytestmark = [pytest.mark.ros, pytest.mark.lsl]
+pytestmark = [pytest.mark.ros, pytest.mark.lsl, pytest.mark.session]
 
 POLICY = "predictive"
 AGE = 33.0

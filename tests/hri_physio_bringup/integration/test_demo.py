@@ -19,7 +19,7 @@ import yaml
 from helpers import ROOT, run_to_end, session_env
 from helpers.session_bags import failed_nodes_logs
 
-pytestmark = [pytest.mark.ros, pytest.mark.lsl]
+pytestmark = [pytest.mark.ros, pytest.mark.lsl, pytest.mark.session]
 
 NODES = ("physio_recorder", "mock_qt_robot", "qt_controller", "audio_streamer", "video_streamer",
          "simulated_participant", "hr_receiver",

@@ -43,7 +43,7 @@ from hri_physio_bridge import topics
 from hri_physio_bringup.isolation import DomainClaim, DomainInUse, claim_domain, claim_lab_domain
 
 REASON = unavailable_reason()
-pytestmark = [pytest.mark.ros, pytest.mark.lsl,
+pytestmark = [pytest.mark.ros, pytest.mark.lsl, pytest.mark.session,
               pytest.mark.skipif(REASON is not None, reason=f"no network-namespace lab here: {REASON}")]
 
 #: Topologies: which host runs each role, and the lab's discovery.

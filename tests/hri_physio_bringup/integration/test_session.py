@@ -59,6 +59,7 @@ def read_bag(bag: Path) -> dict[str, list]:
     return out
 
 
+@pytest.mark.session
 def test_coach_can_adapt_on_the_processors_heart_rate(short_session: list[str], tmp_path: Path) -> None:
     # 10x: the processor's NeuroKit windows (one per 5 s of ECG) keep up on a loaded machine.
     with NodeProcess("hri_physio_session", *short_session, "--hr-source", "ecg", "--no-record",
@@ -86,6 +87,7 @@ def free_port() -> int:
         return probe.getsockname()[1]
 
 
+@pytest.mark.session
 def test_sigint_stops_every_node_and_leaves_a_bag_a_summary_and_a_report(short_session: list[str]) -> None:
     """Ctrl-C mid-session; meanwhile a second session told to use the same ROS domain is refused, and a
     Foxglove client watches the heart rate live (--live)."""

@@ -19,7 +19,7 @@ import pytest
 from helpers import session_env
 from helpers.routines import FOUR_AND_A_HALF_MINUTES, routine_seconds, short_routine
 
-pytestmark = [pytest.mark.ros, pytest.mark.lsl]
+pytestmark = [pytest.mark.ros, pytest.mark.lsl, pytest.mark.session]
 
 SHORT = FOUR_AND_A_HALF_MINUTES
 SESSION_SECONDS = routine_seconds(SHORT)

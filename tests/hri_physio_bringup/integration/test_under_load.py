@@ -19,7 +19,7 @@ from helpers import NodeProcess, session_env
 from helpers.routines import FOUR_AND_A_HALF_MINUTES, short_routine
 from helpers.session_bags import RECEIVERS, bag_messages, check_counter, failed_nodes_logs, session_folder
 
-pytestmark = [pytest.mark.ros, pytest.mark.lsl]
+pytestmark = [pytest.mark.ros, pytest.mark.lsl, pytest.mark.session]
 
 SPEED = 30
 
