@@ -1,9 +1,10 @@
 """A node left alone costs next to nothing, however busy the machine (issue 28).
 
 Each node that only waits is started as a session starts it (on sim time) but given nothing: no
-``/clock``, no messages. Once it has started up, its CPU time over 10 s alone is measured, and then
-the CPU time the same process spends on a known unit of work: answering parameter requests (the
-``get_parameters`` service every node has, handled by the same executor as any message).
+``/clock``, no messages. The four are started together; once all have started up, each one's CPU time
+over the same 10 s alone is measured (they share nothing), and then the CPU time each process spends
+on a known unit of work: answering parameter requests (the ``get_parameters`` service every node has,
+handled by the same executor as any message).
 
 The node passes if the 10 s alone cost at most 2 % of a core, *or* at most what it spends answering
 ``REQUESTS_WORTH`` requests. A loaded machine makes the same Python code take more CPU time (a
@@ -148,6 +149,6 @@ def idle_costs() -> Iterator[dict[str, IdleCost]]:
 @pytest.mark.parametrize("name", sorted(NODES))
 def test_a_node_left_alone_costs_next_to_nothing(name: str, idle_costs: dict[str, IdleCost]) -> None:
     cost = idle_costs[name]
-    print(cost.said(name))
     said = cost.said(name)
+    print(said)
     assert cost.alone <= BUDGET * cost.wall or cost.alone <= REQUESTS_WORTH * cost.per_request, said
