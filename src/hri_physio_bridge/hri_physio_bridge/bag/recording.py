@@ -71,6 +71,7 @@ class RecordingSession:
         self._last_report = (0, 0)
         self.lost: dict[str, int] = {}  # messages missed per topic (publisher sequence gaps)
         self._last_seq: dict[tuple[str, bytes], int] = {}
+        self._last_log_ns: dict[str, int] = {}
         self._loss_log = RateLimitedLog(lambda text: self.log.warning(text), monotonic=monotonic)
         self._file_bytes_seen = 0
         self._monotonic = monotonic
@@ -137,14 +138,23 @@ class RecordingSession:
 
     # -- messages ------------------------------------------------------------
     def on_message(self, topic: str, data: bytes, info: dict[str, Any] | None = None) -> None:
-        """One raw message; stamped with the middleware's receive time (ns) when known."""
+        """One raw message, stamped with the middleware's receive time (ns) when known, but always
+        after the topic's previous message.
+
+        A reliable topic is delivered in order, yet not always received in order: a writer that sent
+        before this reader had matched it (a node just restarted) repairs those first messages after
+        the reader has already received later ones. Readers of a bag go by log time, so a repaired
+        message's receive time would put it after messages delivered after it.
+        """
         received = int(info.get("received_timestamp") or 0) if info else 0
         source = int(info.get("source_timestamp") or 0) if info else 0
         seq = int(info.get("publication_sequence_number") or 0) if info else 0
         gid = info.get("publisher_gid") if seq and info else None
         if gid:
             self._check_sequence(topic, bytes(gid["data"]), seq)
-        self.writer.write(topic, received or self._wall_ns(), data, source, seq)
+        stamp = max(received or self._wall_ns(), self._last_log_ns.get(topic, -1) + 1)
+        self._last_log_ns[topic] = stamp
+        self.writer.write(topic, stamp, data, source, seq)
 
     def _check_sequence(self, topic: str, publisher: bytes, seq: int) -> None:
         key = (topic, publisher)

@@ -19,7 +19,7 @@ from hri_physio_bridge.bag.writer import BagWriter
 def test_skips_are_reported_once_with_reasons(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
     log = logging.getLogger("test.recording")
     writer = BagWriter(tmp_path / "s")
-    session = RecordingSession(writer, TopicSelector(), log, wall_ns=lambda: 42)
+    session = RecordingSession(writer, TopicSelector(), log, wall_ns=lambda: 4200)
     graph = [
         ("/a", ["std_msgs/msg/String"]),
         ("/b", ["foo_msgs/msg/Bar"]),
@@ -45,7 +45,7 @@ def test_skips_are_reported_once_with_reasons(tmp_path: Path, caplog: pytest.Log
     assert "1 topic(s) recorded, 2 skipped; 2 messages" in session.status()
     writer.close()
     got = [(m.log_time, m.publish_time) for _c, _s, m in McapScanner(writer.path).messages()]
-    assert got == [(1000, 900), (42, 42)]
+    assert got == [(1000, 900), (4200, 4200)]
 
 
 def test_conflicting_hashes_are_not_recorded(tmp_path: Path) -> None:
@@ -103,6 +103,25 @@ def test_sequence_gaps_are_counted_per_publisher_reported_and_kept_in_metadata(
     assert session.summary_lines(info) == ["/hr [std_msgs/msg/String]: 8 messages, 5 LOST (sequence gaps)"]
     meta = yaml.safe_load((tmp_path / "g" / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert meta["custom_data"]["lost_messages"] == "/hr: 5"
+
+
+def test_a_message_delivered_after_another_is_logged_after_it(tmp_path: Path) -> None:
+    """A restarted publisher's first messages, repaired by DDS after a later one was received: the bag
+    keeps the order the topic delivered them in (a reader goes by log time), other topics untouched."""
+    from rosbags.highlevel import AnyReader
+
+    writer, session = _hr_session(tmp_path / "r", [0.0])
+    (cand,) = session.candidates([("/x", ["std_msgs/msg/String"])])
+    assert session.start_topic(cand, [default_qos()], [])
+    delivered = [("/hr", "a", 5_000), ("/hr", "b", 2_000), ("/x", "x", 3_000), ("/hr", "c", 2_000),
+                 ("/hr", "d", 9_000)]
+    for topic, text, received in delivered:
+        session.on_message(topic, serialize(String(data=text)), {"received_timestamp": received})
+    writer.close()
+    with AnyReader([tmp_path / "r"]) as reader:
+        got = [(c.topic, reader.deserialize(raw, c.msgtype).data, t) for c, t, raw in reader.messages()]
+    assert got == [("/x", "x", 3_000), ("/hr", "a", 5_000), ("/hr", "b", 5_001), ("/hr", "c", 5_002),
+                   ("/hr", "d", 9_000)]
 
 
 def test_no_loss_leaves_no_lost_entry(tmp_path: Path) -> None:
