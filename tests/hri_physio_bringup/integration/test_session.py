@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from helpers import NodeProcess, own_lines, session_env
+from helpers import NodeProcess, own_lines, session_env, wait_until
 from helpers.foxglove_ws import check_against_schema, watch
 from helpers.routines import FOUR_AND_A_HALF_MINUTES, short_routine
 from helpers.session_bags import failed_nodes_logs
@@ -116,12 +116,16 @@ def test_sigint_stops_every_node_and_leaves_a_bag_a_summary_and_a_report(short_s
         assert len(lines) == 1 and line.startswith("hri_physio_session: error: ROS domain "), line
         assert f"pid {session.proc.pid}" in line and first["folder"] in line
         assert "Traceback" not in second.stdout + second.stderr
-        session.wait_for_output("[session] 01:0", timeout=120)  # a minute of session ran (of 04:30)
+        # Stop mid-session once the coach has set the zone (at calibration's end, a minute into the
+        # 04:30): its state, latched, read through the live view. (The launcher's "01:00" line can
+        # come before the coach has handled that minute's end.)
+        wait_until(lambda: coach_state(f"ws://127.0.0.1:{port}")["zone"] is not None, 120,
+                   lambda: f"the coach's zone\n{session.output}", period=0.5)
         code = session.stop(signal.SIGINT, timeout=120)
     out = session.output
     assert code == 0, failed_nodes_logs(out)
     assert "SIGINT: stopping the session" in out and "Traceback" not in out
-    assert re.search(r"\[session\] stopped before its end: [01]\.\d min of session", out), out
+    assert re.search(r"\[session\] stopped before its end: [0-3]\.\d min of session", out), out
     folder = session_folder(out)
     assert len(list(folder.parent.iterdir())) == 1  # the refused session made no folder
     summary = json.loads((folder / "summary.json").read_text())
@@ -146,6 +150,12 @@ def test_sigint_stops_every_node_and_leaves_a_bag_a_summary_and_a_report(short_s
     report = json.loads((folder / "report.json").read_text())  # the report of what ran
     zone = next(e for e in coach if e["event"] == "zone")
     assert report["hr_rest"] == pytest.approx(zone["hr_rest"], abs=0.01)
+
+
+def coach_state(url: str) -> dict:
+    """The coach's current state (/coach/state, latched), as a live-view client gets it on subscribing."""
+    live = watch(url, {topics.COACH_STATE: 1}, timeout=60)
+    return json.loads(json.loads(live.messages[topics.COACH_STATE][-1][1])["data"])
 
 
 def session_folder_of_running(output: str) -> Path:
