@@ -87,7 +87,7 @@ from hri_physio_bringup.plan import (
     plan_session,
 )
 from hri_physio_bringup.supervision import Loss, Restart, Supervisor, gap_line, restarts_text, status_text
-from hri_physio_bringup.view import SessionView, overdue, session_counts, summary
+from hri_physio_bringup.view import SessionView, every_listener_matched, overdue, session_counts, summary
 from hri_physio_coach.participant.perception import message_key, parse_receipt
 
 #: Session seconds past the routine's end after which a coach that has not ended is stopped.
@@ -356,6 +356,13 @@ class ClockAndWatcher(BackgroundNode):
         their requests (a request published before its subscriber exists would be lost)."""
         return all(node in self.subscriber_nodes(topic) for topic, node in self.listeners)
 
+    def commands_reach(self) -> tuple[int | None, int]:
+        """(subscriptions the coach's command publisher has matched, by its state; subscriptions the
+        graph shows on the command topic)."""
+        with self.lock:
+            matched = (self.view.state or {}).get("command_listeners")
+        return matched, len(self.node.get_subscriptions_info_by_topic(topics.QT_COMMANDS))
+
 
 def build_parser() -> argparse.ArgumentParser:
     p = OneLineErrorParser(
@@ -496,7 +503,8 @@ def wait_for_system(watcher: ClockAndWatcher, group: ProcessGroup, clock: SimClo
             # processor's first HR needs a full window of ECG).
             hr_flowing = view.strap_samples >= 2 and view.hr_seen >= 1
         hosts_up = watcher.hosts is None or watcher.hosts.all_up()
-        if hr_flowing and hosts_up and watcher.robot_side_ready():
+        commands_reach = every_listener_matched(*watcher.commands_reach())
+        if hr_flowing and hosts_up and watcher.robot_side_ready() and commands_reach:
             ready_since[:] = ready_since or [time.monotonic()]
             return time.monotonic() - ready_since[0] >= SETTLE
         return False
@@ -512,8 +520,11 @@ def wait_for_system(watcher: ClockAndWatcher, group: ProcessGroup, clock: SimClo
         strap = view.strap_samples
         waiting = [] if watcher.hosts is None else watcher.hosts.waiting_for()
     hosts = f"; lab hosts not heard: {', '.join(waiting)}" if waiting else ""
+    matched, listeners = watcher.commands_reach()
     return (f"the system was not ready after {timeout:g} s (strap heart-rate samples on ROS 2: {strap}; "
-            f"robot side listening: {watcher.robot_side_ready()}{hosts}); see the folder's logs/")
+            f"robot side listening: {watcher.robot_side_ready()}; the coach's commands reach {matched} of "
+            f"{listeners} listener(s){hosts}); see the folder's logs/")
+
 
 
 class Supervision:

@@ -229,3 +229,11 @@ def session_counts(view: SessionView) -> dict[str, Any]:
         "receivers": {node: dict(status) for node, status in view.receivers.items()},
         "polar_streamer": dict(view.strap_status) if view.strap_status else None,
     }
+
+
+def every_listener_matched(matched: int | None, listeners: int) -> bool:
+    """The coach's command publisher has matched every subscription on its topic. A reliable message
+    reaches a subscription its publisher had matched when sending it, even one whose own side of the
+    match comes later (the middleware repairs it); one sent before that match is lost to it: the
+    session's first commands (the welcome, the music) would never reach the robot."""
+    return isinstance(matched, int) and listeners > 0 and matched >= listeners

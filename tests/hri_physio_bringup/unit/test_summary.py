@@ -2,7 +2,14 @@
 
 from __future__ import annotations
 
-from hri_physio_bringup.view import SessionView, overdue, receiver_text, session_counts, summary
+from hri_physio_bringup.view import (
+    SessionView,
+    every_listener_matched,
+    overdue,
+    receiver_text,
+    session_counts,
+    summary,
+)
 
 
 def started(duration: float | None = 270.0) -> SessionView:
@@ -51,3 +58,10 @@ def test_receiver_lines_say_what_was_lost() -> None:
     view = started()
     view.receivers["hr_receiver"] = {"received_samples": 5, "published_samples": 5}
     assert "[session] hr_receiver: 5 samples received, 5 published, nothing lost" in summary(view, 1.0, None)
+
+
+def test_the_session_starts_once_the_coachs_commands_reach_every_listener() -> None:
+    assert every_listener_matched(3, 3) and every_listener_matched(4, 3)  # a viewer the graph lists later
+    assert not every_listener_matched(2, 3)  # the controller's subscription not matched yet: lost commands
+    assert not every_listener_matched(None, 3)  # no state from the coach yet
+    assert not every_listener_matched(0, 0)  # nobody listens yet

@@ -161,6 +161,8 @@ def test_interactive_waits_for_start_on_stdin_and_stops_on_sigterm(probe: Probe)
                    "the state that counts the unknown line")
         state = next(st for st in probe.states if st["control"]["received"] == 1)
         assert (state["state"], state["start_at"]) == ("idle", None), state
+        # The state says how many subscriptions its commands reach (the probe's; a launcher starts on it).
+        wait_until(lambda: any(st["command_listeners"] >= 1 for st in probe.states), 20, "command_listeners")
         assert not probe.events("session_start"), "started before 'start'"
         assert "waiting for 'start'" in coach.output
         assert coach.proc.stdin is not None

@@ -73,6 +73,8 @@ class QtPhysioCoachNode(ManagedNode):
         self._wake = threading.Event()
         self._state_dirty = True
         self._waiting_said = False  # the coach's waiting_for_hr, as last published
+        #: Subscriptions the command publisher has matched, as last published (command_listeners).
+        self._command_listeners_said = 0
         self.conflict: dict[str, Any] | None = None
         self._control_log = RateLimitedLog(self.get_logger().warning)
         self._own_events = EchoFilter()
@@ -129,7 +131,8 @@ class QtPhysioCoachNode(ManagedNode):
     def state(self) -> dict[str, Any]:
         """The coach's state plus the node's: control lines handled and any conflict found."""
         return {**self.coach.state(), "control": dict(self.control.counts), "start_at": self.control.start_at,
-                "conflict": self.conflict["conflict"] if self.conflict else None}
+                "conflict": self.conflict["conflict"] if self.conflict else None,
+                "command_listeners": self._command_listeners_said}
 
     def _finish(self) -> None:
         self.finished = True
@@ -250,6 +253,9 @@ class QtPhysioCoachNode(ManagedNode):
             waiting = self.coach.waiting_for_heart_rate()
             if waiting != self._waiting_said:  # a launcher driving sim time lets the clock on for it
                 self._waiting_said, self._state_dirty = waiting, True
+            listeners = self.commands.get_subscription_count()
+            if listeners != self._command_listeners_said:  # a launcher starts once every listener has it
+                self._command_listeners_said, self._state_dirty = listeners, True
             if self._state_dirty:
                 self._publish_state()
 
