@@ -526,7 +526,6 @@ def wait_for_system(watcher: ClockAndWatcher, group: ProcessGroup, clock: SimClo
             f"{listeners} listener(s){hosts}); see the folder's logs/")
 
 
-
 class Supervision:
     """The launcher's side of :mod:`~hri_physio_bringup.supervision`: restarts what died, says so."""
 
