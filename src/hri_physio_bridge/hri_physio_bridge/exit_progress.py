@@ -5,11 +5,16 @@ more than a fixed grace period on a busy machine, where it waits for a CPU as lo
 A node stuck on its way out (a deadlock, a hang in a library's shutdown) uses no CPU at all. So the
 launcher gives a stopping process more time for as long as it works, and escalates once it has
 been idle for the grace period (or after a hard limit).
+
+A node's work can be over while its process is not: the ROS 2 middleware's teardown comes after it,
+and can hang (Fast DDS), be cut off or crash. So a node says how its work ended in one line first
+(:func:`done_line`), and the launcher takes the node's outcome from that line (:func:`said_status`).
 """
 
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -71,3 +76,17 @@ class ExitProgress:
                     self.last_work = now
             self._last = (now, activity)
         return now - self.last_work < self.idle_grace and now - self.started < self.limit
+
+
+_DONE = re.compile(r": finished with exit status (-?\d+); shutting down ROS 2$")
+
+
+def done_line(prog: str, code: int) -> str:
+    """The line a node prints once its work is over, before the middleware's teardown."""
+    return f"{prog}: finished with exit status {code}; shutting down ROS 2"
+
+
+def said_status(line: str) -> int | None:
+    """The exit status a :func:`done_line` gives; None for any other line."""
+    found = _DONE.search(line.rstrip())
+    return int(found.group(1)) if found else None

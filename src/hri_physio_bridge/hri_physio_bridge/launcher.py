@@ -7,7 +7,9 @@ grace period, so nodes can flush their logs and bags; the grace after SIGINT las
 node keeps working (:mod:`hri_physio_bridge.exit_progress`), so a drain on a busy machine is not cut
 short. A node that hangs on its way out prints every
 thread's stack on SIGABRT (``run_node`` enables :mod:`faulthandler`) before it dies, so its log
-shows where it was stuck. Each process's whole output can go
+shows where it was stuck. A node's outcome is the exit status it gave its work before the
+middleware's teardown (:attr:`ManagedProcess.returncode`); a teardown that hung or crashed after
+it is said apart (:meth:`ProcessGroup.teardown_faults`). Each process's whole output can go
 to a log file of its own (``log_path``), whatever is echoed to the console. A process that died
 can be started again in its place (:meth:`ProcessGroup.restart`), appending to its log.
 """
@@ -28,7 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TextIO
 
-from hri_physio_bridge.exit_progress import ExitProgress, read_activity
+from hri_physio_bridge.exit_progress import ExitProgress, read_activity, said_status
 from hri_physio_bridge.waiting import wait_until
 
 #: The most time a stopping process that keeps working gets after SIGINT.
@@ -74,15 +76,36 @@ class ManagedProcess:
     log_path: Path | None = None
     env: dict[str, str] | None = None  # as given to start(): a restart gets the same
     echo: bool = True
+    #: The exit status the node gave its work (:func:`~hri_physio_bridge.exit_progress.done_line`).
+    said: int | None = None
 
     @property
     def returncode(self) -> int | None:
-        return self.proc.poll()
+        """The node's outcome once its process has ended: the status it said its work ended with, if it
+        said one (a teardown of the middleware that hung or crashed after it does not change that), else
+        the process's own exit status."""
+        code = self.proc.poll()
+        if code is None:
+            return None
+        if self.reader.is_alive():
+            self.reader.join(1.0)  # the process's last lines, the done line among them
+        return code if self.said is None else self.said
+
+    @property
+    def teardown_fault(self) -> str | None:
+        """What went wrong after the node's work was over, if anything: the process ended with another
+        status than the one its work ended with."""
+        code = self.proc.poll()
+        if code is None or self.said is None or code == self.said:
+            return None
+        how = f"was killed by signal {-code}" if code < 0 else f"exited with status {code}"
+        return (f"{self.name} finished its work (exit status {self.said}), then its process {how} while "
+                f"shutting down ROS 2 (the middleware's teardown hung or failed; its log has the stack)")
 
     def error_line(self) -> str:
         """What the process said when it failed: its ``<prog>: error: ...`` line (else its last
-        error-level log line, else its last line)."""
-        lines = [line.strip() for line in self.lines if line.strip()]
+        error-level log line, else its last line before its done line)."""
+        lines = [line.strip() for line in self.lines if line.strip() and said_status(line) is None]
         for marker in (": error:", "[ERROR]"):
             found = [line for line in lines if marker in line]
             if found:
@@ -157,6 +180,9 @@ class ProcessGroup:
                     log.write(raw if raw.endswith("\n") else raw + "\n")
                     log.flush()  # a crash of the launcher still leaves the log on disk
                 managed.lines.append(line)
+                said = said_status(line)
+                if said is not None:
+                    managed.said = said
                 del managed.lines[: -self.keep_lines]
                 if self.on_line is not None:
                     self.on_line(managed.name, line)
@@ -185,14 +211,17 @@ class ProcessGroup:
         ``limit`` s): a node draining its input on a busy machine is not cut short, a stuck one is
         escalated. :attr:`stop_seconds` says how long each took.
         """
-        codes: dict[str, int] = {}
         for p in reversed(self.procs):
             t0 = time.monotonic()
-            codes[p.name] = self._stop_one(p, grace, limit)
+            self._stop_one(p, grace, limit)
             self.stop_seconds[p.name] = round(time.monotonic() - t0, 3)
         for p in self.procs:
             p.reader.join(2.0)
-        return codes
+        return {p.name: p.proc.wait() if p.said is None else p.said for p in self.procs}
+
+    def teardown_faults(self) -> list[str]:
+        """Each ended process's :attr:`ManagedProcess.teardown_fault`, in start order."""
+        return [fault for p in self.procs if (fault := p.teardown_fault) is not None]
 
     @staticmethod
     def _stop_one(p: ManagedProcess, grace: float, limit: float) -> int:

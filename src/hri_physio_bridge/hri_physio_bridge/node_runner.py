@@ -22,7 +22,6 @@ import contextlib
 import faulthandler
 import io
 import logging
-import os
 import sys
 import threading
 from collections.abc import Callable, Sequence
@@ -44,6 +43,7 @@ from hri_physio_bridge.config import (
     given_options,
     load_yaml,
 )
+from hri_physio_bridge.exit_progress import done_line
 from hri_physio_bridge.ros_tools import ExecutorThread
 from hri_physio_bridge.stop_signals import install_stop_handlers
 
@@ -344,6 +344,7 @@ def run_node(
         return fail(prog, f"ROS arguments: {_rcl_message(exc)}")
     node: ManagedNode | None = None
     spinner: ExecutorThread | None = None
+    code: int | None = None
     try:
         try:
             node = make_node(config) if isinstance(make_node, type) else make_node(config, args)
@@ -359,12 +360,9 @@ def run_node(
             finally:
                 if spinner is not None:
                     spinner.close()
-        ended = shut_down_ros(node)
-    if not ended:
-        # The node's work is done and written; only the middleware's teardown is stuck.
-        print(f"{prog}: warning: the ROS 2 middleware did not shut down within {TEARDOWN_TIMEOUT:g} s; "
-              f"exiting with status {code} without waiting for it", file=sys.stderr, flush=True)
-        exit_now(code)
+        if code == 0:  # a failed node has said why already, in its error line
+            print(done_line(prog, code), file=sys.stderr, flush=True)
+        shut_down_ros(node)
     return code
 
 
@@ -372,35 +370,38 @@ def run_node(
 TEARDOWN_TIMEOUT = 5.0
 
 
-def shut_down_ros(node: Any = None, timeout: float | None = None) -> bool:
-    """Destroy ``node``, shut rclpy down and destroy its context (the DDS participant); False if that
-    did not end in time (``TEARDOWN_TIMEOUT``).
+def shut_down_ros(node: Any = None, timeout: float | None = None) -> None:
+    """Destroy ``node``, shut rclpy down and destroy its context (the DDS participant), within
+    ``timeout`` (``TEARDOWN_TIMEOUT``): past it, the process prints every thread's stack and exits
+    with status 1.
 
     Left to the interpreter's exit, the participant is deleted by C++ destructors after Python's
-    own shutdown, where a hang shows no Python stack and outlasts the launcher's grace. Destroying
-    a node's publishers can hang as well (Fast DDS deleting a reliable writer whose reader's process
-    was killed: seen once on a loaded machine, mock_qt_robot after its controller's SIGKILL). Here
-    it all runs on a thread of its own, so a hang is bounded and said.
+    own shutdown, where a hang shows no Python stack and outlasts the launcher's grace. The teardown
+    itself can hang in Fast DDS (deleting a writer, seen on loaded machines), inside a call that
+    holds the GIL: no Python thread runs then, so the bound is faulthandler's own C thread. A node
+    whose work went well has printed :func:`~hri_physio_bridge.exit_progress.done_line` before
+    this, so the launcher still knows that it did.
     """
-    done = threading.Event()
+    _flush_outputs()
+    limit = TEARDOWN_TIMEOUT if timeout is None else timeout
+    try:
+        faulthandler.dump_traceback_later(limit, exit=True, file=sys.stderr)
+    except (AttributeError, ValueError, io.UnsupportedOperation):  # stderr is no real file (pytest)
+        faulthandler.dump_traceback_later(limit, exit=True, file=sys.__stderr__)
+    try:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+        rclpy.get_default_context().destroy()
+    finally:
+        faulthandler.cancel_dump_traceback_later()
 
-    def teardown() -> None:
-        try:
-            if node is not None:
-                node.destroy_node()
-            rclpy.try_shutdown()
-            rclpy.get_default_context().destroy()
-        finally:
-            done.set()
 
-    threading.Thread(target=teardown, name="ros-teardown", daemon=True).start()
-    return done.wait(TEARDOWN_TIMEOUT if timeout is None else timeout)
-
-
-def exit_now(code: int) -> None:
-    """Flush what Python buffers (logs, stdout, stderr) and end the process without its exit handlers."""
-    logging.shutdown()
+def _flush_outputs() -> None:
+    """Flush what Python buffers (logs, stdout, stderr): a process cut off by :func:`os._exit` keeps it."""
+    for handler in logging.getLogger().handlers:
+        with contextlib.suppress(Exception):
+            handler.flush()
     for stream in (sys.stdout, sys.stderr):
         with contextlib.suppress(Exception):
             stream.flush()
-    os._exit(code)

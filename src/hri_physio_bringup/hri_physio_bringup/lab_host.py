@@ -83,7 +83,7 @@ def host_summary(lab: Lab, role: str, folder: SessionFolder, started: datetime, 
                  "stamps its LSL samples on that clock too",
         "restarts": restarts,
         "nodes": {name: {"script": p.argv[0].rsplit("/", 1)[-1], "log": f"logs/{name}.log",
-                         "exit_status": node_codes.get(name),
+                         "exit_status": node_codes.get(name), "teardown_fault": p.teardown_fault,
                          "restarts": sum(r["node"] == name for r in restarts)} for name, p in procs.items()},
     }
 
@@ -149,6 +149,8 @@ def run_host(options: SessionConfig, lab: Lab, plan: SessionPlan, folder: Sessio
         if out.stopped_by:
             console.say(f"{out.stopped_by}: stopping this host's nodes")
         out.node_codes = group.stop()
+        for fault in group.teardown_faults():
+            console.say(f"[lab] warning: {fault}")
         if beacon is not None:
             beacon.close()
         restarts = [r.record() for r in supervisor.records]

@@ -643,6 +643,8 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
             lab.hosts, lab.outages = hosts, hosts.outages if hosts is not None else []
             lab.wall_offsets = dict(watcher.wall_offsets)
         out.node_codes = group.stop()
+        for fault in group.teardown_faults():
+            console.say(f"[session] warning: {fault}")
         if lab is not None:  # the receivers' last statuses (published as they stopped) hold their corrections
             with watcher.lock:
                 lab.lsl_corrections = {name: (view.receivers.get(name) or {}).get("clock_correction")
@@ -722,6 +724,7 @@ def _summary_json(options: SessionConfig, plan: SessionPlan, folder: SessionFold
             n.name: {"script": n.script, "config": f"configs/{n.name}.yaml", "log": f"logs/{n.name}.log",
                      "argv": procs[n.name].argv[1:] if n.name in procs else None,
                      "exit_status": out.node_codes.get(n.name),
+                     "teardown_fault": procs[n.name].teardown_fault if n.name in procs else None,
                      "stop_seconds": out.stop_seconds.get(n.name),
                      "restarts": sum(r["node"] == n.name for r in out.restarts)}
             for n in plan.nodes

@@ -107,6 +107,36 @@ def test_a_node_stuck_on_its_way_out_prints_where_before_it_is_killed(on_path: P
     assert any("close_that_never_returns" in line for line in stuck.lines), stuck.lines
 
 
+def test_a_node_s_outcome_is_the_status_its_work_ended_with_not_its_teardown_s(on_path: Path) -> None:
+    """A node that said its work ended (status 0) and then died in the middleware's teardown (cut off
+    with status 1, or a crash) counts as 0; the teardown is a fault said apart. A node that said
+    nothing is its process's status."""
+    from hri_physio_bridge.exit_progress import done_line
+
+    script(on_path, "cut_node", f"import os\nprint({done_line('cut_node', 0)!r}, flush=True)\n"
+                                "print('Timeout (0:00:05)!', flush=True)\nos._exit(1)\n")
+    script(on_path, "crash_node", f"import os, signal\nprint({done_line('crash_node', 3)!r}, flush=True)\n"
+                                  "os.kill(os.getpid(), signal.SIGSEGV)\n")
+    script(on_path, "fine_node", f"import sys\nprint({done_line('fine_node', 0)!r}, flush=True)\n")
+    script(on_path, "plain_node", "import sys\nprint('oops', flush=True)\nsys.exit(5)\n")
+    group = ProcessGroup(out=io.StringIO())
+    cut, crash, fine, plain = (group.start(n, f"{n}_node", env=dict(os.environ))
+                               for n in ("cut", "crash", "fine", "plain"))
+    for p in (cut, crash, fine, plain):
+        p.proc.wait(30)
+    assert (cut.returncode, crash.returncode, fine.returncode, plain.returncode) == (0, 3, 0, 5)
+    assert group.stop() == {"cut": 0, "crash": 3, "fine": 0, "plain": 5}
+    assert group.teardown_faults() == [
+        "cut finished its work (exit status 0), then its process exited with status 1 while shutting "
+        "down ROS 2 (the middleware's teardown hung or failed; its log has the stack)",
+        f"crash finished its work (exit status 3), then its process was killed by signal {signal.SIGSEGV} "
+        "while shutting down ROS 2 (the middleware's teardown hung or failed; its log has the stack)",
+    ]
+    assert fine.teardown_fault is None and plain.teardown_fault is None
+    assert plain.error_line() == "oops"
+    assert crash.error_line() == "no output (exit status 3)"  # the done line is no error message
+
+
 def test_a_failed_node_is_reported_by_its_own_error_line() -> None:
     """What a launcher says when a node refuses to start: the node's one-line error, not a count."""
     group = ProcessGroup(out=io.StringIO())

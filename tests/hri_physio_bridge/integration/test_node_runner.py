@@ -53,7 +53,7 @@ def test_a_node_that_does_not_apply_a_dynamic_option_refuses_its_change(ros_cont
 
 
 NODE_SCRIPT = """
-import sys, threading, time
+import ctypes, sys, threading, time
 import rclpy
 from hri_physio_bridge import node_runner
 from hri_physio_bridge.config import NodeConfig, option
@@ -69,30 +69,61 @@ class Node(node_runner.ManagedNode):
         print("worked", flush=True)
         return self.config.status
 
+def sleep_holding_the_gil():  # as Fast DDS deleting a writer from rclpy's C++: no Python thread runs
+    ctypes.PyDLL(None).sleep(3600)
+
+node_runner.TEARDOWN_TIMEOUT = 0.5
 if sys.argv[1] == "hang":
-    node_runner.TEARDOWN_TIMEOUT = 0.5
     rclpy.try_shutdown = lambda: time.sleep(3600)  # a middleware teardown that never ends
 elif sys.argv[1] == "hang_destroying_the_node":
-    node_runner.TEARDOWN_TIMEOUT = 0.5
     Node.destroy_node = lambda self: time.sleep(3600)  # a writer's deletion that never ends
+elif sys.argv[1] == "hang_holding_the_gil":
+    Node.destroy_node = lambda self: sleep_holding_the_gil()
 sys.exit(node_runner.run_node("teardown_test", Options, Node, argv=sys.argv[2:]))
 """
 
 
-@pytest.mark.parametrize("mode", ["hang", "hang_destroying_the_node", "normal"])
-def test_a_stuck_middleware_teardown_is_bounded_and_keeps_the_exit_status(mode: str, tmp_path) -> None:
+@pytest.mark.parametrize("mode", ["hang", "hang_destroying_the_node", "hang_holding_the_gil", "normal"])
+def test_a_stuck_middleware_teardown_is_bounded_and_the_work_s_status_is_said_first(mode: str,
+                                                                                     tmp_path) -> None:
+    import subprocess
+    import sys
+    import time
+
+    from hri_physio_bridge.exit_progress import said_status
+
+    script = tmp_path / "node.py"
+    script.write_text(NODE_SCRIPT)
+    t0 = time.monotonic()
+    done = subprocess.run([sys.executable, str(script), mode, "--status", "0"], capture_output=True,
+                          text=True, timeout=120, stdin=subprocess.DEVNULL)
+    assert time.monotonic() - t0 < 60  # the hour-long hangs were cut off
+    assert done.stdout == "worked\n"
+    lines = done.stderr.splitlines()
+    assert "teardown_test: finished with exit status 0; shutting down ROS 2" in lines, done.stderr
+    assert [said_status(line) for line in lines if said_status(line) is not None] == [0]
+    if mode == "normal":
+        assert done.returncode == 0, done.stderr
+        assert "Timeout" not in done.stderr
+    else:  # faulthandler's timer: where it hung, then status 1
+        assert done.returncode == 1, done.stderr
+        assert "Timeout (0:00:00.500000)!" in done.stderr
+        hung_in = {"hang": "<lambda>", "hang_destroying_the_node": "<lambda>",
+                   "hang_holding_the_gil": "sleep_holding_the_gil"}[mode]
+        assert f"in {hung_in}" in done.stderr, done.stderr
+
+
+@pytest.mark.parametrize(("status", "code"), [("4", 4), ("-1", 2)])
+def test_a_node_that_fails_says_no_done_line(status: str, code: int, tmp_path) -> None:
+    """Its work failed (status 4), or it never started (a bad option: status 2): its own error says so."""
     import subprocess
     import sys
 
     script = tmp_path / "node.py"
     script.write_text(NODE_SCRIPT)
-    done = subprocess.run([sys.executable, str(script), mode, "--status", "4"], capture_output=True,
+    done = subprocess.run([sys.executable, str(script), "normal", "--status", status], capture_output=True,
                           text=True, timeout=120, stdin=subprocess.DEVNULL)
-    assert done.returncode == 4, done.stderr
-    assert done.stdout == "worked\n"
-    said = ("teardown_test: warning: the ROS 2 middleware did not shut down within 0.5 s; "
-            "exiting with status 4")
-    assert (said in done.stderr) == (mode != "normal"), done.stderr
+    assert done.returncode == code and "finished with exit status" not in done.stderr, done.stderr
 
 
 def test_the_executor_thread_waits_without_polling_and_close_wakes_it(ros_context: Any) -> None:

@@ -1,4 +1,5 @@
-"""Judging a stopping process: more time while it works, none once it has idled for the grace."""
+"""Judging a stopping process: more time while it works, none once it has idled for the grace; the
+line a node says its work's status in."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from hri_physio_bridge.exit_progress import Activity, ExitProgress, read_activity
+from hri_physio_bridge.exit_progress import Activity, ExitProgress, done_line, read_activity, said_status
 
 
 def looks(progress: ExitProgress, samples: list[tuple[float, Activity | None]]) -> list[bool]:
@@ -68,3 +69,19 @@ def test_read_activity_of_this_process() -> None:
     sum(i * i for i in range(2_000_000))
     after = read_activity(os.getpid())
     assert after is not None and after.cpu_seconds > before.cpu_seconds
+
+
+@pytest.mark.parametrize("code", [0, 1, 2, 4, 130, -6])
+def test_the_done_line_gives_back_its_status(code: int) -> None:
+    assert said_status(done_line("physio_receiver", code)) == code
+    assert said_status(done_line("physio_receiver", code) + "\n") == code
+
+
+@pytest.mark.parametrize("line", [
+    "", "physio_receiver: finished", "finished with exit status 0",
+    "physio_receiver: finished with exit status x; shutting down ROS 2",
+    "physio_receiver: finished with exit status 0; shutting down ROS 2 (and more)",
+    "[INFO] [1.0] [rx]: 3 samples",
+])
+def test_other_lines_give_no_status(line: str) -> None:
+    assert said_status(line) is None
