@@ -104,7 +104,7 @@ class ManagedProcess:
 
     def error_line(self) -> str:
         """What the process said when it failed: its ``<prog>: error: ...`` line (else its last
-        error-level log line, else its last line before its done line)."""
+        error-level log line, else its last line, its done line aside)."""
         lines = [line.strip() for line in self.lines if line.strip() and said_status(line) is None]
         for marker in (": error:", "[ERROR]"):
             found = [line for line in lines if marker in line]

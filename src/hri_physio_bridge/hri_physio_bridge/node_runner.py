@@ -398,7 +398,8 @@ def shut_down_ros(node: Any = None, timeout: float | None = None) -> None:
 
 
 def _flush_outputs() -> None:
-    """Flush what Python buffers (logs, stdout, stderr): a process cut off by :func:`os._exit` keeps it."""
+    """Flush what Python buffers (logs, stdout, stderr), so that a teardown cut off by faulthandler's
+    ``_exit`` does not lose it."""
     for handler in logging.getLogger().handlers:
         with contextlib.suppress(Exception):
             handler.flush()
