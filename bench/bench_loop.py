@@ -11,8 +11,9 @@ CPU time over that window as a share of one core, and the total.
 Latency of the input path: this process opens its own LSL inlet on the strap's heart-rate stream
 (``PolarH10/<device>/HR``) and subscribes, like the coach, to the coach's heart-rate input
 (``/physio/polar_h10/hr``, the same QoS). Each sample carries its strap stamp; it is matched by
-that stamp, and the latency is the time (``pylsl.local_clock``, both ends in this process) from
-its arrival on LSL to its arrival on the coach's topic: LSL push -> physio_receiver -> ROS 2 ->
+that stamp, and the latency is the time (``pylsl.local_clock``, one monotonic clock for both ends:
+the LSL end runs in a child process of its own, so the ROS end's callbacks cannot delay its clock
+reading) from its arrival on LSL to its arrival on the coach's topic: LSL push -> physio_receiver -> ROS 2 ->
 the coach's input. p50 and p99 over the window. Not in the figure: the hop from the strap's push
 to an inlet (localhost TCP, the same for this inlet as for the receiver's), and the coach's own
 executor (this process's subscriber stands in for the coach's, with the same QoS).
@@ -45,6 +46,7 @@ import time
 import uuid
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pylsl
@@ -122,10 +124,42 @@ def node_name(pid: int) -> str:
 # -- the latency probe ---------------------------------------------------------------------------
 
 
+def lsl_arrivals(name: str, measure: Any, counted: Any, stop: Any, conn: Any) -> None:
+    """The arrival time (``pylsl.local_clock``) of each sample of LSL stream ``name``, by its stamp,
+    taken while ``measure`` is set and ``counted`` is not; sent through ``conn`` once ``stop`` is set.
+
+    Runs in a process of its own: in the bench's process, a ROS callback holding the GIL would delay
+    this thread's clock reading (seen: samples that reached ROS "before" LSL, by up to 0.4 ms).
+    """
+    arrivals: dict[float, float] = {}
+    found: list = []
+    while not found and not stop.is_set():
+        found = pylsl.resolve_byprop("name", name, 1, 1.0)
+    if found:
+        inlet = pylsl.StreamInlet(found[0], max_buflen=60)
+        inlet.open_stream(30)
+        while not stop.is_set():
+            _sample, stamp = inlet.pull_sample(timeout=0.5)
+            if stamp:
+                now = pylsl.local_clock()
+                if measure.is_set() and not counted.is_set():
+                    arrivals[round(float(stamp), 6)] = now
+        inlet.close_stream()
+    conn.send(arrivals)
+    conn.close()
+
+
 class LatencyProbe:
-    """Arrival of each strap HR sample on LSL and on the coach's input topic, by its own stamp."""
+    """Arrival of each strap HR sample on LSL and on the coach's input topic, by its own stamp.
+
+    The LSL side is a process of its own (:func:`lsl_arrivals`); the ROS side is this process's
+    executor thread, the only thread here that works during the window. Both read the same
+    monotonic clock (``pylsl.local_clock``).
+    """
 
     def __init__(self, device: str, topic: str, domain: int) -> None:
+        import multiprocessing
+
         import rclpy
         from std_msgs.msg import Float64MultiArray
 
@@ -133,11 +167,9 @@ class LatencyProbe:
         from hri_physio_bridge.ros_frames import msg_to_frame
         from hri_physio_bridge.ros_tools import ExecutorThread
 
-        self.lsl_arrival: dict[float, float] = {}  # strap stamp -> arrival on LSL (local_clock)
         self.ros_arrival: dict[float, float] = {}  # strap stamp -> arrival on the coach's topic
+        self._lsl_arrival: dict[float, float] | None = None  # strap stamp -> arrival on LSL, once ended
         self.measuring = False
-        self.stop_lsl = False
-        self._stop = threading.Event()
         self._lock = threading.Lock()
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=domain)  # the session's, whatever this shell says
@@ -153,37 +185,43 @@ class LatencyProbe:
 
         self.node.create_subscription(Float64MultiArray, topic, on_frame, frame_qos())
         self._spinner = ExecutorThread(self.node, context=self.context)
-        self._thread = threading.Thread(target=self._pull, args=(f"PolarH10/{device}/HR",), daemon=True)
-        self._thread.start()
+        mp = multiprocessing.get_context("spawn")
+        self._measure, self._counted, self._stop = mp.Event(), mp.Event(), mp.Event()
+        self._conn, child_conn = mp.Pipe(duplex=False)
+        self._lsl = mp.Process(target=lsl_arrivals, name="bench-lsl-arrivals", daemon=True,
+                               args=(f"PolarH10/{device}/HR", self._measure, self._counted, self._stop,
+                                     child_conn))
+        self._lsl.start()
 
-    def _pull(self, name: str) -> None:
-        found: list = []
-        while not found and not self._stop.is_set():
-            found = pylsl.resolve_byprop("name", name, 1, 1.0)
-        if not found:
-            return
-        inlet = pylsl.StreamInlet(found[0], max_buflen=60)
-        inlet.open_stream(30)
-        while not self._stop.is_set():
-            _sample, stamp = inlet.pull_sample(timeout=0.5)
-            if stamp:
-                now = pylsl.local_clock()
-                with self._lock:
-                    if self.measuring and not self.stop_lsl:
-                        self.lsl_arrival[round(float(stamp), 6)] = now
-        inlet.close_stream()
+    def start_measuring(self) -> None:
+        with self._lock:
+            self.measuring = True
+        self._measure.set()
+
+    def stop_counting_lsl(self) -> None:
+        """Samples that arrive on LSL from now on are not counted (those on ROS still are)."""
+        self._counted.set()
+
+    def _end_lsl(self) -> dict[float, float]:
+        if self._lsl_arrival is None:
+            self._stop.set()
+            self._lsl_arrival = self._conn.recv() if self._conn.poll(10.0) else {}
+            self._lsl.join(5.0)
+        return self._lsl_arrival
 
     def latencies(self) -> list[float]:
         """Seconds from LSL to the coach's topic of each sample seen on both, in stamp order."""
+        lsl = self._end_lsl()
         with self._lock:
-            both = sorted(set(self.lsl_arrival) & set(self.ros_arrival))
-            return [self.ros_arrival[t] - self.lsl_arrival[t] for t in both]
+            both = sorted(set(lsl) & set(self.ros_arrival))
+            return [self.ros_arrival[t] - lsl[t] for t in both]
 
     def close(self) -> None:
         import rclpy
 
-        self._stop.set()
-        self._thread.join(3.0)
+        self._end_lsl()
+        if self._lsl.is_alive():
+            self._lsl.kill()
         self._spinner.close()
         self.node.destroy_node()
         rclpy.shutdown(context=self.context)
@@ -299,8 +337,7 @@ def run_loop(label: str, seconds: float, settle: float, env: dict[str, str] | No
         time.sleep(settle)
         pids = {proc.pid: LAUNCHER, **{p: node_name(p) for p in descendants(proc.pid)}}
         start = {pid: cpu_seconds(pid) for pid in pids}
-        with probe._lock:
-            probe.measuring = True
+        probe.start_measuring()
         wall0 = time.monotonic()
         taken0 = (viewer.messages, viewer.bytes) if viewer is not None else (0, 0)
         time.sleep(seconds)
@@ -310,8 +347,7 @@ def run_loop(label: str, seconds: float, settle: float, env: dict[str, str] | No
             print(f"{label}: the live viewer took {viewer.messages - taken0[0]} messages, "
                   f"{(viewer.bytes - taken0[1]) / 1e6:.2f} MB in the window"
                   + (f" (then: {viewer.error})" if viewer.error else ""), flush=True)
-        with probe._lock:
-            probe.stop_lsl = True  # samples taken from now on are not counted
+        probe.stop_counting_lsl()
         for pid, name in pids.items():
             a, b = start[pid], end[pid]
             if a is None or b is None:
