@@ -72,7 +72,8 @@ class Node(node_runner.ManagedNode):
 def sleep_holding_the_gil():  # as Fast DDS deleting a writer from rclpy's C++: no Python thread runs
     ctypes.PyDLL(None).sleep(3600)
 
-node_runner.TEARDOWN_TIMEOUT = 0.5
+if sys.argv[1] != "normal":  # long enough for the real parts of a teardown on a busy machine
+    node_runner.TEARDOWN_TIMEOUT = 3.0
 if sys.argv[1] == "hang":
     rclpy.try_shutdown = lambda: time.sleep(3600)  # a middleware teardown that never ends
 elif sys.argv[1] == "hang_destroying_the_node":
@@ -107,7 +108,7 @@ def test_a_stuck_middleware_teardown_is_bounded_and_the_work_s_status_is_said_fi
         assert "Timeout" not in done.stderr
     else:  # faulthandler's timer: where it hung, then status 1
         assert done.returncode == 1, done.stderr
-        assert "Timeout (0:00:00.500000)!" in done.stderr
+        assert "Timeout (0:00:03)!" in done.stderr
         hung_in = {"hang": "<lambda>", "hang_destroying_the_node": "<lambda>",
                    "hang_holding_the_gil": "sleep_holding_the_gil"}[mode]
         assert f"in {hung_in}" in done.stderr, done.stderr
