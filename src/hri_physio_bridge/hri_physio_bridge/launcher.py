@@ -217,7 +217,7 @@ class ProcessGroup:
             self.stop_seconds[p.name] = round(time.monotonic() - t0, 3)
         for p in self.procs:
             p.reader.join(2.0)
-        return {p.name: p.proc.wait() if p.said is None else p.said for p in self.procs}
+        return {p.name: p.returncode for p in self.procs}  # every process has ended: no None
 
     def teardown_faults(self) -> list[str]:
         """Each ended process's :attr:`ManagedProcess.teardown_fault`, in start order."""
