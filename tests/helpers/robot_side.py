@@ -15,6 +15,8 @@ from helpers import wait_until
 from hri_physio_bridge.ros_tools import ExecutorThread, clock_message
 
 SIM_START = 1000.0
+#: A query every controller answers without touching the robot (Probe.wait_answering).
+PING = "get emotion"
 
 
 class ClockDriver:
@@ -92,18 +94,47 @@ class Probe:
             self.joints.append((stamp, dict(zip(msg.name, msg.position, strict=True))))
 
     def connected(self) -> bool:
+        """This probe has matched a controller's input and output (its own view of the graph only)."""
         return self.input.get_subscription_count() > 0 and self.output_sub.get_publisher_count() > 0
 
+    def wait_answering(self, timeout: float, what: str) -> None:
+        """Until a controller answers this probe: a harmless query, sent again each second, is answered.
+
+        Each side discovers the other on its own. ``connected`` says the probe has matched the
+        controller; the controller's reply writer may not have matched the probe's reader yet, and a
+        reply sent before that match is lost (the topic is volatile). Under load that took seconds.
+        """
+        def answered() -> bool:
+            if not self.connected():
+                return False
+            with self.lock:
+                n = len(self.replies)
+            self.input.publish(self._string(data=PING))
+            deadline = time.monotonic() + 1.0
+            while time.monotonic() < deadline:
+                with self.lock:
+                    if any(r["command"] == PING for r in self.replies[n:]):
+                        return True
+                time.sleep(0.02)
+            return False
+
+        wait_until(answered, timeout, what)
+
     def send(self, line: str, timeout: float = 20.0) -> dict[str, Any]:
-        """Publish one command and return its reply (commands are answered in order)."""
+        """Publish one command and return its reply (commands are answered in order; a late answer to
+        :meth:`wait_answering`'s query is passed over)."""
         with self.lock:
             n = len(self.replies)
         self.input.publish(self._string(data=line))
-        wait_until(lambda: len(self.replies) > n, timeout, f"a reply to {line!r}")
-        with self.lock:
-            reply = self.replies[n]
-        assert reply["command"] == line.strip(), reply
-        return reply
+
+        def reply() -> dict[str, Any] | None:
+            with self.lock:
+                return next((r for r in self.replies[n:] if r["command"] != PING or line == PING), None)
+
+        wait_until(lambda: reply() is not None, timeout, f"a reply to {line!r}")
+        answer = reply()
+        assert answer is not None and answer["command"] == line.strip(), answer
+        return answer
 
     def events_of(self, kind: str, **match: Any) -> list[dict[str, Any]]:
         with self.lock:

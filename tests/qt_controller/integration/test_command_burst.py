@@ -33,8 +33,8 @@ def test_every_line_of_a_10000_line_burst_gets_one_reply_in_order(wall_probe) ->
     lines = [f"set volume {i % 101}" if i % 100 == 0 else f"set volume {101 + i}" for i in range(BURST)]
     reaching_robot = set(lines[::100])
     with NodeProcess("mock_qt_robot") as mock, NodeProcess("qt_controller") as ctl:
-        wait_until(lambda: p.connected() and p.events_sub.get_publisher_count() > 0, 60,
-                   "discovery of qt_controller and mock_qt_robot")
+        p.wait_answering(60, "qt_controller to answer")
+        wait_until(lambda: p.events_sub.get_publisher_count() > 0, 60, "discovery of mock_qt_robot")
         # Volume 1 is not among the burst's volumes: a late event of this warm-up is told apart. Its
         # event arriving proves the mock's event publisher has matched the probe: an event published
         # before that match is not delivered (volatile), which once lost the burst's first event.
@@ -110,7 +110,7 @@ def refused(probe) -> list[str]:
 def test_remote_exit_is_refused_unless_allowed(wall_probe) -> None:
     p = wall_probe
     with NodeProcess("qt_controller", "--require-listeners", "false") as ctl:
-        wait_until(p.connected, 60, "discovery of qt_controller")
+        p.wait_answering(60, "qt_controller to answer")
         refused = p.send("exit")
         assert not refused["ok"] and refused["data"]["error"] == "remote_exit_disabled", refused
         assert "allow_remote_exit" in refused["message"]
@@ -119,7 +119,7 @@ def test_remote_exit_is_refused_unless_allowed(wall_probe) -> None:
         assert ctl.stop(signal.SIGTERM) == 0, ctl.output
     wait_until(lambda: not p.connected(), 30, "the first controller to leave the graph")
     with NodeProcess("qt_controller", "--ros-args", "-p", "allow_remote_exit:=true") as ctl:
-        wait_until(p.connected, 60, "discovery of the second qt_controller")
+        p.wait_answering(60, "the second qt_controller to answer")
         allowed = p.send("exit")
         assert allowed["ok"], allowed
         assert ctl.wait(30) == 0, ctl.output

@@ -102,7 +102,7 @@ def test_controller_keeps_working_across_a_mock_restart(wall_probe) -> None:
         with NodeProcess("qt_controller", "--ros-args", "-p", "service_timeout:=1.5",
                          "-p", "discovery_timeout:=1.0") as ctl:
             ctl.wait_for_output("listening for commands", 60)
-            wait_until(p.connected, 20, "discovery of qt_controller")
+            p.wait_answering(20, "qt_controller to answer")
             wait_until(lambda: p.send("set gesture base 2.0")["ok"], 60, "the first gesture to be accepted")
             assert p.send("set speech before the restart")["ok"]
 
