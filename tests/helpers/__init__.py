@@ -49,6 +49,28 @@ def own_lines(stderr: str) -> list[str]:
     return [line for line in stderr.strip().splitlines() if not _MIDDLEWARE_LINE.match(line)]
 
 
+def wait_unmatched(node, timeout: float = 5.0) -> bool:
+    """Until none of ``node``'s publishers and subscriptions is matched any more (at most ``timeout``).
+
+    For a node about to be destroyed whose peers, node subprocesses, have just exited. Fast DDS hears
+    of a peer's departure on threads of its own and unmatches its endpoints there; deleting an endpoint
+    meanwhile can crash (eProsima/Fast-DDS#3303: a match callback on a reader being deleted). A loaded
+    run's test worker died of a segfault in such a ``destroy_node``. Bounded: a peer killed without a
+    goodbye leaves only when its lease ends, and the node is then destroyed all the same. Only for a
+    node with no live peer left in its domain (it would wait the whole ``timeout``).
+    """
+    def unmatched() -> bool:
+        return (all(p.get_subscription_count() == 0 for p in node.publishers)
+                and all(s.get_publisher_count() == 0 for s in node.subscriptions))
+
+    deadline = time.monotonic() + timeout
+    while not unmatched():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.02)
+    return True
+
+
 def publish_burst(publisher, messages, timeout: float = 60.0) -> None:
     """Publish every message in order as fast as the reliable KEEP_ALL ``publisher`` takes them.
 

@@ -8,6 +8,7 @@ from typing import Any
 
 import pytest
 
+from helpers import wait_unmatched
 from helpers.robot_side import Probe, RobotSide
 from hri_physio_bridge.ros_tools import ExecutorThread
 
@@ -38,4 +39,5 @@ def wall_probe(ros_context: Any) -> Iterator[Probe]:
         yield probe
     finally:
         spinner.close()
+        wait_unmatched(probe.node)  # the tests' node subprocesses have gone: let their departure settle
         probe.node.destroy_node()
