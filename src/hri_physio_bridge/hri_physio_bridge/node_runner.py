@@ -44,7 +44,7 @@ from hri_physio_bridge.config import (
     load_yaml,
 )
 from hri_physio_bridge.exit_progress import done_line
-from hri_physio_bridge.ros_tools import ExecutorThread
+from hri_physio_bridge.ros_tools import ExecutorThread, shut_down_ros
 from hri_physio_bridge.stop_signals import install_stop_handlers
 
 C = TypeVar("C", bound=NodeConfig)
@@ -365,44 +365,3 @@ def run_node(
         shut_down_ros(node)
     return code
 
-
-#: The most time the middleware's teardown (rcl shutdown, the DDS participant) may take at exit.
-TEARDOWN_TIMEOUT = 5.0
-
-
-def shut_down_ros(node: Any = None, timeout: float | None = None) -> None:
-    """Destroy ``node``, shut rclpy down and destroy its context (the DDS participant), within
-    ``timeout`` (``TEARDOWN_TIMEOUT``): past it, the process prints every thread's stack and exits
-    with status 1.
-
-    Left to the interpreter's exit, the participant is deleted by C++ destructors after Python's
-    own shutdown, where a hang shows no Python stack and outlasts the launcher's grace. The teardown
-    itself can hang in Fast DDS (deleting a writer, seen on loaded machines), inside a call that
-    holds the GIL: no Python thread runs then, so the bound is faulthandler's own C thread. A node
-    whose work went well has printed :func:`~hri_physio_bridge.exit_progress.done_line` before
-    this, so the launcher still knows that it did.
-    """
-    _flush_outputs()
-    limit = TEARDOWN_TIMEOUT if timeout is None else timeout
-    try:
-        faulthandler.dump_traceback_later(limit, exit=True, file=sys.stderr)
-    except (AttributeError, ValueError, io.UnsupportedOperation):  # stderr is no real file (pytest)
-        faulthandler.dump_traceback_later(limit, exit=True, file=sys.__stderr__)
-    try:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-        rclpy.get_default_context().destroy()
-    finally:
-        faulthandler.cancel_dump_traceback_later()
-
-
-def _flush_outputs() -> None:
-    """Flush what Python buffers (logs, stdout, stderr), so that a teardown cut off by faulthandler's
-    ``_exit`` does not lose it."""
-    for handler in logging.getLogger().handlers:
-        with contextlib.suppress(Exception):
-            handler.flush()
-    for stream in (sys.stdout, sys.stderr):
-        with contextlib.suppress(Exception):
-            stream.flush()

@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
+import faulthandler
+import io
+import logging
+import sys
 import threading
 import time
 import uuid
@@ -71,6 +76,50 @@ class ExecutorThread:
         self.executor.shutdown(timeout_sec=1.0)
 
 
+#: The most time the middleware's teardown (rcl shutdown, the DDS participant) may take at exit.
+TEARDOWN_TIMEOUT = 5.0
+
+
+def shut_down_ros(node: Any = None, timeout: float | None = None) -> None:
+    """Destroy ``node``, shut rclpy down and destroy its context (the DDS participant), within
+    ``timeout`` (``TEARDOWN_TIMEOUT``): past it, the process prints every thread's stack and exits
+    with status 1.
+
+    Left to the interpreter's exit, the participant is deleted by C++ destructors after Python's
+    own shutdown, where a hang shows no Python stack and outlasts the launcher's grace. The teardown
+    itself can hang in Fast DDS (deleting a writer, seen on loaded machines), inside a call that
+    holds the GIL: no Python thread runs then, so the bound is faulthandler's own C thread. A node
+    whose work went well has printed :func:`~hri_physio_bridge.exit_progress.done_line` before
+    this, so the launcher still knows that it did; a launcher calls this once its summary is written.
+    """
+    import rclpy
+
+    _flush_outputs()
+    limit = TEARDOWN_TIMEOUT if timeout is None else timeout
+    try:
+        faulthandler.dump_traceback_later(limit, exit=True, file=sys.stderr)
+    except (AttributeError, ValueError, io.UnsupportedOperation):  # stderr is no real file (pytest)
+        faulthandler.dump_traceback_later(limit, exit=True, file=sys.__stderr__)
+    try:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+        rclpy.get_default_context().destroy()
+    finally:
+        faulthandler.cancel_dump_traceback_later()
+
+
+def _flush_outputs() -> None:
+    """Flush what Python buffers (logs, stdout, stderr), so that a teardown cut off by faulthandler's
+    ``_exit`` does not lose it."""
+    for handler in logging.getLogger().handlers:
+        with contextlib.suppress(Exception):
+            handler.flush()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+
+
 class BackgroundNode:
     """An rclpy node spun on its own thread, in a process that handles its own signals.
 
@@ -81,7 +130,6 @@ class BackgroundNode:
     def __init__(self, name_prefix: str) -> None:
         import rclpy
 
-        self._rclpy = rclpy
         rclpy.init(args=None, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
         self.node = rclpy.create_node(f"{name_prefix}_{uuid.uuid4().hex[:4]}")
         self._spinner: ExecutorThread | None = None
@@ -89,8 +137,14 @@ class BackgroundNode:
     def start(self) -> None:
         self._spinner = ExecutorThread(self.node)
 
-    def close(self) -> None:
+    def stop_spinning(self) -> None:
+        """No callback runs after this (the node stays, for :meth:`close`)."""
         if self._spinner is not None:
             self._spinner.close()
-        self.node.destroy_node()
-        self._rclpy.try_shutdown()
+            self._spinner = None
+
+    def close(self) -> None:
+        """Stop spinning, then destroy the node and rclpy's context within ``TEARDOWN_TIMEOUT`` (see
+        :func:`shut_down_ros`: a teardown stuck in the middleware ends the process with status 1)."""
+        self.stop_spinning()
+        shut_down_ros(self.node)

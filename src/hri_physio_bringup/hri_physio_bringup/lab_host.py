@@ -152,7 +152,7 @@ def run_host(options: SessionConfig, lab: Lab, plan: SessionPlan, folder: Sessio
         for fault in group.teardown_faults():
             console.say(f"[lab] warning: {fault}")
         if beacon is not None:
-            beacon.close()
+            beacon.stop_spinning()
         restarts = [r.record() for r in supervisor.records]
         if restarts:
             console.say(restarts_text(restarts))
@@ -165,4 +165,6 @@ def run_host(options: SessionConfig, lab: Lab, plan: SessionPlan, folder: Sessio
         if out.problem:
             print(f"hri_physio_session: error: {out.problem}", file=sys.stderr, flush=True)
         console.say(f"[lab] {role} host done ({outcome}); folder {folder.display()}")
+        if beacon is not None:
+            beacon.close()  # last: a teardown stuck in the middleware ends the process (shut_down_ros)
     return out.code

@@ -574,8 +574,12 @@ class Supervision:
 
 def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder, console: SessionConsole,
                 view: SessionView, group: ProcessGroup, stop: threading.Event, out: Outcome,
-                lab: LabRun | None = None) -> SimClock:
-    """Start the nodes, wait for them, run the routine to its end (or a stop); returns the sim clock."""
+                teardown: contextlib.ExitStack, lab: LabRun | None = None) -> SimClock:
+    """Start the nodes, wait for them, run the routine to its end (or a stop); returns the sim clock.
+
+    The launcher's own ROS 2 teardown goes on ``teardown``, for its caller to run once the summary is
+    written: a teardown stuck in the middleware ends the process (see ``shut_down_ros``), and what
+    the session did must be on disk by then."""
     receivers = {name: topic for name, (topic, _rate) in plan.receivers.items()}
     # A simulated participant's loop can be held to the clock; a real strap lives in real time.
     guard = None if options.polar else ClockGuard(hr_wait=plan.coach.hr_wait,
@@ -584,6 +588,7 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
     supervisor = Supervisor(options.max_restarts)
     hosts = None if lab is None else HostWatch(lab.lab, lab.role)
     watcher = ClockAndWatcher(view, plan.hr_topic, receivers, plan.listeners, guard, strap, supervisor, hosts)
+    teardown.callback(watcher.close)
     rates = {name: rate for name, (_topic, rate) in plan.receivers.items()}
     supervision = Supervision(supervisor, group, watcher, console, out, rates)
     # The clock runs at --speed from the beginning: before 'start' the participant sits and the
@@ -651,7 +656,7 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
                                        for name in receivers}
         out.stop_seconds = dict(group.stop_seconds)
         supervision.report()
-        watcher.close()
+        watcher.stop_spinning()
         if guard is not None:
             out.clock = guard.report(clock)
             if clock.held_wall >= 1.0:
@@ -835,8 +840,9 @@ def _run(options: SessionConfig, plan: SessionPlan, folder: SessionFolder, claim
     folder.write_summary(_summary_json(options, plan, folder, claim, started, view, out, group, None, None,
                                        running=True))
     clock: SimClock | None = None
+    teardown = contextlib.ExitStack()
     try:
-        clock = run_session(options, plan, folder, console, view, group, stop, out, lab)
+        clock = run_session(options, plan, folder, console, view, group, stop, out, teardown, lab)
     finally:
         console.close()
         bag = folder.bag if not options.no_record and folder.bag.exists() else None
@@ -856,6 +862,7 @@ def _run(options: SessionConfig, plan: SessionPlan, folder: SessionFolder, claim
         if out.problem:
             print(f"{PROG}: error: {out.problem}", file=sys.stderr, flush=True)
         console.say(f"[session] session folder: {folder.display()}")
+        teardown.close()
     return out.code
 
 

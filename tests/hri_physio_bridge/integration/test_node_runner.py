@@ -55,7 +55,7 @@ def test_a_node_that_does_not_apply_a_dynamic_option_refuses_its_change(ros_cont
 NODE_SCRIPT = """
 import ctypes, sys, threading, time
 import rclpy
-from hri_physio_bridge import node_runner
+from hri_physio_bridge import node_runner, ros_tools
 from hri_physio_bridge.config import NodeConfig, option
 
 class Options(NodeConfig):
@@ -73,7 +73,7 @@ def sleep_holding_the_gil():  # as Fast DDS deleting a writer from rclpy's C++: 
     ctypes.PyDLL(None).sleep(3600)
 
 if sys.argv[1] != "normal":  # long enough for the real parts of a teardown on a busy machine
-    node_runner.TEARDOWN_TIMEOUT = 3.0
+    ros_tools.TEARDOWN_TIMEOUT = 3.0
 if sys.argv[1] == "hang":
     rclpy.try_shutdown = lambda: time.sleep(3600)  # a middleware teardown that never ends
 elif sys.argv[1] == "hang_destroying_the_node":

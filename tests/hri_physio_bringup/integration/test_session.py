@@ -165,6 +165,34 @@ def session_folder_of_running(output: str) -> Path:
     return Path(m.group(1))
 
 
+#: The launcher, its own ROS 2 teardown stuck as a Fast DDS deadlock leaves it: in C, holding the GIL.
+STUCK_TEARDOWN = """
+import ctypes, sys
+import rclpy.node
+from hri_physio_bringup import session
+rclpy.node.Node.destroy_node = lambda self: ctypes.PyDLL(None).sleep(3600)
+sys.exit(session.main(sys.argv[1:]))
+"""
+
+
+def test_a_launcher_stuck_in_its_ros_teardown_has_written_everything(short_session: list[str]) -> None:
+    """The launcher tears its own ROS 2 node down last, after summary.json and its last line, and a
+    teardown stuck in the middleware ends the process (status 1, every thread's stack) instead of
+    leaving it to hang. (A session fails at start-up here, so that the test is short.)"""
+    run = subprocess.run([sys.executable, "-c", STUCK_TEARDOWN, *short_session, "--startup-timeout", "1"],
+                         capture_output=True, text=True, timeout=180, env=session_env(),
+                         stdin=subprocess.DEVNULL)
+    assert run.returncode == 1, (run.stdout, run.stderr)
+    folder = session_folder(run.stdout)
+    assert run.stdout.splitlines()[-1] == f"[session] session folder: {folder}"
+    summary = json.loads((folder / "summary.json").read_text())
+    assert summary["outcome"] == "failed" and "not ready after 1 s" in summary["problem"], summary
+    # Every node was stopped (some by the SIGINT itself: still starting, they had no handler yet).
+    assert all(node["exit_status"] is not None for node in summary["nodes"].values()), summary["nodes"]
+    assert "hri_physio_session: error: the system was not ready after 1 s" in run.stderr
+    assert "Timeout" in run.stderr and "shut_down_ros" in run.stderr, run.stderr
+
+
 @pytest.mark.parametrize("args,message", [
     (["--speed", "0"], "speed: expected greater than 0"),
     (["--age", "150"], "age: expected less than or equal to 120"),
