@@ -410,7 +410,7 @@ class Outcome:
     stopped_by: str | None = None
     wall: float = 0.0
     node_codes: dict[str, int] = field(default_factory=dict)
-    stop_seconds: dict[str, float] = field(default_factory=dict)  # SIGINT to exit, per node
+    stop_seconds: dict[str, float] = field(default_factory=dict)  # SIGINT to the end of its work, per node
     #: How the clock guard held sim time back for the loop (ClockGuard.report), None: no guard.
     clock: dict[str, Any] | None = None
     #: Every restart of a node (Restart.record) and the loss that ended the session (Loss.event), if any.

@@ -86,6 +86,34 @@ def test_a_node_still_working_on_its_way_out_is_not_cut_short(on_path: Path) -> 
     assert group.stop_seconds["draining"] >= 1.5
 
 
+def test_the_next_node_is_stopped_once_this_one_s_work_is_over_not_its_teardown(on_path: Path,
+                                                                              tmp_path: Path) -> None:
+    """Reverse start order is kept (each node outlives those started after it), and a node's ROS 2
+    teardown, after its done line, overlaps the next node's stop instead of coming before it."""
+    events = tmp_path / "events.txt"
+    for name in ("first", "second", "third"):
+        script(on_path, f"{name}_node", (
+            "import time\n"
+            "from hri_physio_bridge.exit_progress import done_line\n"
+            "from hri_physio_bridge.stop_signals import install_stop_handlers\n"
+            "def note(what):\n"
+            f"    with open({str(events)!r}, 'a') as f: f.write(f'{name} {{what}} {{time.monotonic()}}\\n')\n"
+            "stop = install_stop_handlers()\n"
+            "print('ready', flush=True)\n"
+            "stop.wait()\n"
+            "note('stopping')\n"
+            f"print(done_line({name!r}, 0), flush=True)\n"
+            "time.sleep(3.0)  # a slow middleware teardown\n"
+            "note('exiting')\n"))
+    group = ProcessGroup(out=io.StringIO())
+    started(group, "first", "second", "third")
+    assert group.stop(grace=5.0) == {"first": 0, "second": 0, "third": 0}
+    at = {(n, what): float(t) for n, what, t in (line.split() for line in events.read_text().splitlines())}
+    for later, earlier in (("third", "second"), ("second", "first")):
+        assert at[(later, "stopping")] < at[(earlier, "stopping")] < at[(later, "exiting")], at
+    assert group.teardown_faults() == []
+
+
 def test_a_node_stuck_on_its_way_out_prints_where_before_it_is_killed(on_path: Path) -> None:
     """SIGINT is taken, the node then hangs (as in a close that never returns): SIGABRT shows where."""
     script(on_path, "stuck_node", (
