@@ -143,7 +143,9 @@ def test_a_node_s_outcome_is_the_status_its_work_ended_with_not_its_teardown_s(o
 
     script(on_path, "cut_node", f"import os\nprint({done_line('cut_node', 0)!r}, flush=True)\n"
                                 "print('Timeout (0:00:05)!', flush=True)\nos._exit(1)\n")
-    script(on_path, "crash_node", f"import os, signal\nprint({done_line('crash_node', 3)!r}, flush=True)\n"
+    script(on_path, "crash_node", "import os, resource, signal\n"
+                                  f"print({done_line('crash_node', 3)!r}, flush=True)\n"
+                                  "resource.setrlimit(resource.RLIMIT_CORE, (0, 0))  # no core file\n"
                                   "os.kill(os.getpid(), signal.SIGSEGV)\n")
     script(on_path, "fine_node", f"import sys\nprint({done_line('fine_node', 0)!r}, flush=True)\n")
     script(on_path, "plain_node", "import sys\nprint('oops', flush=True)\nsys.exit(5)\n")

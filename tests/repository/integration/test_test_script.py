@@ -15,10 +15,12 @@ from helpers import ROOT
 
 PASSING = "def test_one():\n    pass\n\n\ndef test_two():\n    pass\n"
 CRASHING = """import os
+import resource
 import signal
 
 
 def test_crash():
+    resource.setrlimit(resource.RLIMIT_CORE, (0, 0))  # no core file left behind
     os.kill(os.getpid(), signal.SIGSEGV)
 
 
