@@ -59,16 +59,13 @@ def wait_unmatched(node, timeout: float = 5.0) -> bool:
     goodbye leaves only when its lease ends, and the node is then destroyed all the same. Only for a
     node with no live peer left in its domain (it would wait the whole ``timeout``).
     """
+    from hri_physio_bridge.waiting import wait_until as waited
+
     def unmatched() -> bool:
         return (all(p.get_subscription_count() == 0 for p in node.publishers)
                 and all(s.get_publisher_count() == 0 for s in node.subscriptions))
 
-    deadline = time.monotonic() + timeout
-    while not unmatched():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.02)
-    return True
+    return waited(unmatched, timeout, poll=0.02)
 
 
 def publish_burst(publisher, messages, timeout: float = 60.0) -> None:

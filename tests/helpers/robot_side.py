@@ -13,6 +13,7 @@ from typing import Any
 
 from helpers import wait_until
 from hri_physio_bridge.ros_tools import ExecutorThread, clock_message
+from hri_physio_bridge.waiting import wait_until as waited
 
 SIM_START = 1000.0
 #: A query every controller answers without touching the robot (Probe.wait_answering).
@@ -110,13 +111,12 @@ class Probe:
             with self.lock:
                 n = len(self.replies)
             self.input.publish(self._string(data=PING))
-            deadline = time.monotonic() + 1.0
-            while time.monotonic() < deadline:
+
+            def pinged() -> bool:
                 with self.lock:
-                    if any(r["command"] == PING for r in self.replies[n:]):
-                        return True
-                time.sleep(0.02)
-            return False
+                    return any(r["command"] == PING for r in self.replies[n:])
+
+            return waited(pinged, 1.0, poll=0.02)
 
         wait_until(answered, timeout, what)
 

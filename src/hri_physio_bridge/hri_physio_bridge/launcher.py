@@ -251,14 +251,12 @@ class ProcessGroup:
 
 def _wait_for(p: ManagedProcess, done: Callable[[], bool], timeout: float) -> bool:
     """Until ``done()`` (looked at every SAID_POLL s, or at once when ``p`` exits), at most ``timeout``."""
-    deadline = time.monotonic() + timeout
-    while not done():
-        left = deadline - time.monotonic()
-        if left <= 0:
-            return False
+    def sleep(seconds: float) -> bool:  # a wait that ends when the process does
         with contextlib.suppress(subprocess.TimeoutExpired):
-            p.proc.wait(min(SAID_POLL, left))
-    return True
+            p.proc.wait(seconds)
+        return False
+
+    return wait_until(done, timeout, poll=SAID_POLL, sleep=sleep)
 
 
 def _escalate(p: ManagedProcess, grace: float, done: Callable[[], bool]) -> None:

@@ -66,9 +66,8 @@ class ExecutorThread:
     def close(self, join_timeout: float = 10.0) -> None:
         """Stop spinning and shut the executor down (the nodes stay for their owner to destroy).
 
-        The owner destroys the nodes next, which is unsafe while this thread still waits on them (a
-        loaded run's test process crashed in ``destroy_node`` while another thread was in C code; a
-        2-s join may have let that happen). So the join waits longer; idle, it takes milliseconds."""
+        The owner destroys the nodes next, which is unsafe while this thread still waits on them, so
+        the join is generous for a loaded machine; idle, it takes milliseconds."""
         if not self._closed.done():
             self._closed.set_result(None)
         if self._thread.is_alive():
