@@ -110,6 +110,15 @@ class WindowResult:
         return not self.flags
 
 
+def load_neurokit() -> None:
+    """Import NeuroKit2 now (it imports scipy.stats, scikit-learn and more: seconds of CPU, once).
+
+    Imported lazily, it would make the first window seconds late, at a moment of the session no one
+    chose, with the input piling up meanwhile; a processor calls this before it opens its input.
+    """
+    import neurokit2  # noqa: F401
+
+
 def _empty(mode: str, n: int, flags: list[Flag]) -> WindowResult:
     """A window NeuroKit2 did not (successfully) process: every feature NaN, with the reasons."""
     reason = "; ".join(f.reason for f in flags)

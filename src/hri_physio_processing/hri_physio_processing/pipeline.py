@@ -38,6 +38,7 @@ from hri_physio_bridge.streamers.base import (
 from hri_physio_bridge.streamers.opener import StreamOpener
 from hri_physio_bridge.waiting import Backoff, Clock, Sleeper, wait_for_consumers
 from hri_physio_processing.config import ProcessorConfig
+from hri_physio_processing.features import load_neurokit
 from hri_physio_processing.processor import NeurokitProcessor, Output, StatusOutput
 
 #: Inputs that are there or not (a file): never waited for.
@@ -98,6 +99,9 @@ class ProcessingPipeline:
     def run(self, stop: threading.Event) -> int:
         """0 when the input ended or a stop came, 1 on an input error (logged in one line)."""
         try:
+            # Seconds of CPU, before the input is open: not in the first window, and not while frames
+            # queue up (a stop that comes meanwhile is seen once it is done).
+            load_neurokit()
             if self._consumers is not None and self.cfg.wait_for_consumers > 0:
                 wait_for_consumers(self._consumers, 1, self.cfg.wait_for_consumers,
                                    what=f"every output under {self._outputs_label}/", log=self.log,

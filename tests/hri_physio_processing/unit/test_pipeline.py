@@ -305,3 +305,36 @@ def test_the_stopped_event_counts_what_was_drained_and_an_error_names_what_was_l
     assert (stopped["drained_frames"], stopped["input"]["backlog"]) == (3, 197)
     errors = rec.at(logging.ERROR)
     assert len(errors) == 1 and "stopped with 197 input frame(s) received but not processed" in errors[0]
+
+
+LOADS_BEFORE_THE_FIRST_WINDOW = """
+import logging, sys, threading
+import numpy as np
+from hri_physio_bridge.frames import Frame
+from hri_physio_bridge.streamers.csv_stream import CsvStreamer
+from hri_physio_processing.config import ProcessorConfig
+from hri_physio_processing.pipeline import ProcessingPipeline
+
+path = sys.argv[1]
+with open(path, "w") as fh:  # 2 s of samples: less than the shortest window, so no window runs
+    fh.write("t,ecg\\n" + "".join(f"{i / 130},{np.sin(i / 10)}\\n" for i in range(260)))
+cfg = ProcessorConfig.from_mapping({"input": f"csv:{path}?rate=0", "output_prefix": "/test/ecg",
+                                    "window_seconds": 10, "hop_seconds": 5, "min_window_seconds": 5})
+assert "neurokit2" not in sys.modules
+out = []
+pipeline = ProcessingPipeline(cfg, CsvStreamer(f"{path}?rate=0"), out.append, logging.getLogger("t"))
+assert pipeline.run(threading.Event()) == 0
+assert pipeline.processor.stats.windows == 0, pipeline.processor.stats
+print("neurokit2" in sys.modules)
+"""
+
+
+def test_neurokit_is_loaded_before_the_input_is_opened_not_at_the_first_window(tmp_path: Path) -> None:
+    """Its import costs seconds of CPU: at the first window it would make that window late."""
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-c", LOADS_BEFORE_THE_FIRST_WINDOW, str(tmp_path / "ecg.csv")],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "True"
