@@ -75,12 +75,50 @@ class ExecutorThread:
         self.executor.shutdown(timeout_sec=1.0)
 
 
+class TakenOnDemand:
+    """Subscriptions that no executor waits on: the middleware keeps each one's newest messages (its
+    QoS depth) and :meth:`take` hands them over when asked.
+
+    For a stream watched only now and then (a receiver's output around its restart): in an executor,
+    each of its messages would wake the spinning thread (ten a second for ECG frames) for nothing.
+    The subscriptions live on a node of their own (``name``, in ``context``: None is rclpy's default
+    one), which no executor spins; :meth:`destroy` destroys it.
+    """
+
+    def __init__(self, name: str, context: Any = None) -> None:
+        import rclpy
+
+        self.node = rclpy.create_node(name, context=context, start_parameter_services=False,
+                                      enable_rosout=False)
+        self._subs: dict[str, Any] = {}
+
+    def subscribe(self, key: str, msg_type: Any, topic: str, qos: Any) -> None:
+        self._subs[key] = self.node.create_subscription(msg_type, topic, _never_called, qos)
+
+    def take(self, key: str) -> list[Any]:
+        """The messages of ``key``'s subscription received since the last take, oldest first."""
+        sub = self._subs[key]
+        taken: list[Any] = []
+        with sub.handle:
+            while (message := sub.handle.take_message(sub.msg_type, sub.raw)) is not None:
+                taken.append(message[0])
+        return taken
+
+    def destroy(self) -> None:
+        self._subs.clear()
+        self.node.destroy_node()
+
+
+def _never_called(_message: Any) -> None:
+    """The callback of a :class:`TakenOnDemand` subscription, which no executor runs."""
+
+
 #: The most time the middleware's teardown (rcl shutdown, the DDS participant) may take at exit.
 TEARDOWN_TIMEOUT = 5.0
 
 
-def shut_down_ros(node: Any = None, timeout: float | None = None) -> None:
-    """Destroy ``node``, shut rclpy down and destroy its context (the DDS participant), within
+def shut_down_ros(*nodes: Any, timeout: float | None = None) -> None:
+    """Destroy ``nodes``, shut rclpy down and destroy its context (the DDS participant), within
     ``timeout`` (``TEARDOWN_TIMEOUT``): past it, the process prints every thread's stack and exits
     with status 1.
 
@@ -100,8 +138,9 @@ def shut_down_ros(node: Any = None, timeout: float | None = None) -> None:
     except (AttributeError, ValueError, io.UnsupportedOperation):  # stderr is no real file (pytest)
         faulthandler.dump_traceback_later(limit, exit=True, file=sys.__stderr__)
     try:
-        if node is not None:
-            node.destroy_node()
+        for node in nodes:
+            if node is not None:
+                node.destroy_node()
         rclpy.try_shutdown()
         rclpy.get_default_context().destroy()
     finally:
@@ -132,6 +171,13 @@ class BackgroundNode:
         rclpy.init(args=None, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
         self.node = rclpy.create_node(f"{name_prefix}_{uuid.uuid4().hex[:4]}")
         self._spinner: ExecutorThread | None = None
+        self._on_demand: list[TakenOnDemand] = []
+
+    def taken_on_demand(self, suffix: str) -> TakenOnDemand:
+        """Subscriptions beside this node's that no thread spins (destroyed by :meth:`close`)."""
+        reader = TakenOnDemand(f"{self.node.get_name()}_{suffix}")
+        self._on_demand.append(reader)
+        return reader
 
     def start(self) -> None:
         self._spinner = ExecutorThread(self.node)
@@ -146,4 +192,4 @@ class BackgroundNode:
         """Stop spinning, then destroy the node and rclpy's context within ``TEARDOWN_TIMEOUT`` (see
         :func:`shut_down_ros`: a teardown stuck in the middleware ends the process with status 1)."""
         self.stop_spinning()
-        shut_down_ros(self.node)
+        shut_down_ros(*(reader.node for reader in self._on_demand), self.node)

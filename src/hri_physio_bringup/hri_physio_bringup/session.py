@@ -128,8 +128,6 @@ class ClockAndWatcher(BackgroundNode):
         self.clock_pub = self.node.create_publisher(Clock, "/clock", CLOCK_DEPTH)
         self.control_pub = self.node.create_publisher(String, topics.COACH_CONTROL, command_qos())
         self.events_pub = self.node.create_publisher(String, topics.SESSION_EVENTS, event_qos())
-        #: Restarts of receivers whose gap their first new frame closed (for the main thread to publish).
-        self.closed_gaps: list[Restart] = []
         self.hosts = hosts
         #: A lab's hosts heard or lost: (console line, event to publish) for the main thread to say.
         self.host_news: list[tuple[str, dict[str, Any] | None]] = []
@@ -200,6 +198,7 @@ class ClockAndWatcher(BackgroundNode):
         self.node.create_subscription(String, topics.QT_MOCK_EVENTS, on_json(count_action), event_qos())
         for node in receivers:
             self.node.create_subscription(String, f"/{node}/status", on_json(receiver_status(node)), 10)
+        self.supervisor = supervisor
         if supervisor is not None:
             self._watch_outputs(receivers, supervisor)
         if strap_node is not None:
@@ -210,24 +209,27 @@ class ClockAndWatcher(BackgroundNode):
         self.start()
 
     def _watch_outputs(self, receivers: dict[str, str], supervisor: Supervisor) -> None:
-        """Each receiver's output frames: where a restarted receiver's gap begins and ends."""
+        """Each receiver's output frames, where a restarted receiver's gap begins and ends: kept by the
+        middleware (the newest 1000 frames) and taken only around a restart (:meth:`take_outputs`)."""
         from std_msgs.msg import Float64MultiArray
 
         from hri_physio_bridge.qos import frame_qos
-        from hri_physio_bridge.ros_frames import msg_to_frame
 
-        def output(node: str) -> Callable[[Float64MultiArray], None]:
-            def callback(msg: Float64MultiArray) -> None:
-                stamps = msg_to_frame(msg).timestamps
-                with self.lock:
-                    closed = supervisor.output(node, stamps)
-                    if closed is not None:
-                        self.closed_gaps.append(closed)
-            return callback
-
+        self.outputs = self.taken_on_demand("outputs")
         for node, topic in receivers.items():
             supervisor.track(node)
-            self.node.create_subscription(Float64MultiArray, topic, output(node), frame_qos())
+            self.outputs.subscribe(node, Float64MultiArray, topic, frame_qos())
+
+    def take_outputs(self, node: str) -> Restart | None:
+        """Tell the supervisor the frames ``node`` published since the last take (main thread); the
+        restart whose gap they closed, if any."""
+        from hri_physio_bridge.ros_frames import msg_to_frame
+
+        assert self.supervisor is not None
+        closed = None
+        for msg in self.outputs.take(node):
+            closed = self.supervisor.output(node, msg_to_frame(msg).timestamps) or closed
+        return closed
 
     def _watch_hosts(self, hosts: HostWatch) -> None:
         """The lab's other hosts: their heartbeats, and the latched end of the session for them."""
@@ -548,25 +550,29 @@ class Supervision:
                 return True
         for record in sup.due():
             old = next(p for p in self.group.procs if p.name == record.node)
+            if sup.tracks(record.node):  # what it published before it died: where its gap begins
+                self.watcher.take_outputs(record.node)
             self.group.restart(old, f"[session] --- {record.node} died with exit status "
                                f"{status_text(record.exit_status)}: restart {record.restart} of "
                                f"{sup.max_restarts}, same command line; its output continues here ---")
-            with self.watcher.lock:  # the receivers' output callbacks read the gap state
-                sup.started(record, sim_t)
+            sup.started(record, sim_t)
             self.watcher.publish_event(record.event())
             self.console.say(record.line(sup.max_restarts))
-        with self.watcher.lock:
-            closed, self.watcher.closed_gaps = self.watcher.closed_gaps, []
-        for record in closed:
+        for record in self._closed_gaps():
             event = record.gap_event(self.rates.get(record.node))
             record.missing = event["missing"]
             self.watcher.publish_event(event)
             self.console.say(gap_line(event))
         return False
 
+    def _closed_gaps(self) -> list[Restart]:
+        """The restarted receivers whose first new frame has come since the last call."""
+        closed = [self.watcher.take_outputs(node) for node in self.supervisor.watching()]
+        return [record for record in closed if record is not None]
+
     def report(self) -> None:
-        with self.watcher.lock:
-            self.out.restarts = [r.record() for r in self.supervisor.records]
+        self._closed_gaps()  # a gap closed since the last step is in the summary (its event is not sent)
+        self.out.restarts = [r.record() for r in self.supervisor.records]
         loss = self.supervisor.loss
         self.out.lost = None if loss is None else loss.event()
         self.out.awaiting_restart = self.supervisor.awaiting_restart()

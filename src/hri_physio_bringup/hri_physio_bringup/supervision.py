@@ -230,6 +230,14 @@ class Supervisor:
         self._last_t[node] = stamps[-1] if not math.isfinite(last) else max(last, stamps[-1])
         return closed
 
+    def tracks(self, node: str) -> bool:
+        """Whether ``node``'s output is watched for gaps (:meth:`track`)."""
+        return node in self._last_t
+
+    def watching(self) -> list[str]:
+        """The restarted receivers whose gap is still open (waiting for their first new frame)."""
+        return list(self._watching)
+
     def track(self, node: str) -> None:
         """Watch ``node``'s output for gaps (a receiver)."""
         self._last_t.setdefault(node, math.nan)

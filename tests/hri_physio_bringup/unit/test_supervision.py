@@ -101,15 +101,19 @@ def test_the_first_loss_is_the_one_kept() -> None:
 def test_a_receivers_gap_runs_from_its_last_sample_before_the_restart_to_its_first_after() -> None:
     clock = FakeClock()
     sup = Supervisor(monotonic=clock)
+    assert not sup.tracks(HR_RECEIVER)
     sup.track(HR_RECEIVER)
+    assert sup.tracks(HR_RECEIVER) and sup.watching() == []
     assert sup.output(HR_RECEIVER, [10.0, 11.0]) is None
     record = sup.died(HR_RECEIVER, -9, sim_t=50.0)
     assert isinstance(record, Restart)
     assert sup.output(HR_RECEIVER, [12.0]) is None  # in flight from the dead process: before the restart
     clock.now += 1.0
     sup.started(sup.due()[0], sim_t=60.0)
+    assert sup.watching() == [HR_RECEIVER]  # the launcher takes its output until the gap closes
     closed = sup.output(HR_RECEIVER, [19.0, 20.0])
     assert closed is record and record.gap == (12.0, 19.0)
+    assert sup.watching() == []
     assert record.gap_event(1.0) == {"t": 60.0, "event": RECEIVER_GAP, "node": HR_RECEIVER, "restart": 1,
                                      "last_before": 12.0, "first_after": 19.0, "missing": 6}
     assert gap_line(record.gap_event(1.0)) == ("[session] hr_receiver publishes again: 6 sample(s) of its "
