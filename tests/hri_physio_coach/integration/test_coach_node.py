@@ -528,6 +528,8 @@ def test_whole_session_under_sim_time_with_the_robot_side(probe: Probe) -> None:
     announcement = next(s for s in spoken if "resting heart rate" in s)
     assert "85.4" in announcement and "125.2" in announcement and "155.1" in announcement
     assert "QT/happy" in {e["name"] for e in probe.events("emotion_started", "mock")}
-    # The robot acted on ROS time: the warm-up's first video within a few sim seconds of 180 s.
+    # The robot acted on ROS time: the warm-up's first video soon after 180 s of sim time (a wall-time
+    # stamp would be decades off). Soon: the command goes coach -> controller -> mock while the clock
+    # runs at 36x, so a loaded machine's half second of wall time is 18 s here (13 s were seen).
     first_video = next(e for e in probe.events("video", "mock") if e["name"] == "marching")
-    assert 0.0 <= first_video["t"] - (t0 + WARM) < 10.0
+    assert 0.0 <= first_video["t"] - (t0 + WARM) < 60.0
