@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import signal
+import statistics
 import subprocess
 import sys
 import time
@@ -166,8 +167,12 @@ def test_stamps_are_arrival_times_not_take_times(tmp_path: Path, prefix: str, no
     assert [int(text) for _, _, text in got] == list(range(40))
     delays = [(t - s) / 1e9 for (_, t, _), s in zip(got, sent_ns, strict=True)]
     print(f"\nreceive stamp - send time with a 0.5 s poll: max {max(delays) * 1e3:.1f} ms")
-    # taken up to 0.5 s late; stamped on arrival (loopback: well under 0.1 s even when loaded)
-    assert all(-0.01 <= d < 0.1 for d in delays), delays
+    # Taken up to 0.5 s late, so take-time stamps would be 0.25 s late on the median; stamped on
+    # arrival, the median is under a millisecond idle. A loaded machine can hold the middleware's
+    # receive thread back for a moment (100.6 ms seen once with one core kept busy): the bound on
+    # each is looser than the one on the median.
+    assert all(-0.01 <= d < 0.25 for d in delays), delays
+    assert statistics.median(delays) < 0.05, delays
 
 
 def _strings(raw: list[tuple[str, int, bytes]]) -> list[tuple[str, int, str]]:
