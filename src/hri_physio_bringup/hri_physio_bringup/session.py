@@ -198,7 +198,6 @@ class ClockAndWatcher(BackgroundNode):
         self.node.create_subscription(String, topics.QT_MOCK_EVENTS, on_json(count_action), event_qos())
         for node in receivers:
             self.node.create_subscription(String, f"/{node}/status", on_json(receiver_status(node)), 10)
-        self.supervisor = supervisor
         if supervisor is not None:
             self._watch_outputs(receivers, supervisor)
         if strap_node is not None:
@@ -210,7 +209,7 @@ class ClockAndWatcher(BackgroundNode):
 
     def _watch_outputs(self, receivers: dict[str, str], supervisor: Supervisor) -> None:
         """Each receiver's output frames, where a restarted receiver's gap begins and ends: kept by the
-        middleware (the newest 1000 frames) and taken only around a restart (:meth:`take_outputs`)."""
+        middleware (the newest 1000 frames) and taken only around a restart (:meth:`output_stamps`)."""
         from std_msgs.msg import Float64MultiArray
 
         from hri_physio_bridge.qos import frame_qos
@@ -220,16 +219,11 @@ class ClockAndWatcher(BackgroundNode):
             supervisor.track(node)
             self.outputs.subscribe(node, Float64MultiArray, topic, frame_qos())
 
-    def take_outputs(self, node: str) -> Restart | None:
-        """Tell the supervisor the frames ``node`` published since the last take (main thread); the
-        restart whose gap they closed, if any."""
+    def output_stamps(self, node: str) -> list[Any]:
+        """The sample stamps (an array) of each frame the receiver ``node`` published since the last call."""
         from hri_physio_bridge.ros_frames import msg_to_frame
 
-        assert self.supervisor is not None
-        closed = None
-        for msg in self.outputs.take(node):
-            closed = self.supervisor.output(node, msg_to_frame(msg).timestamps) or closed
-        return closed
+        return [msg_to_frame(msg).timestamps for msg in self.outputs.take(node)]
 
     def _watch_hosts(self, hosts: HostWatch) -> None:
         """The lab's other hosts: their heartbeats, and the latched end of the session for them."""
@@ -551,7 +545,7 @@ class Supervision:
         for record in sup.due():
             old = next(p for p in self.group.procs if p.name == record.node)
             if sup.tracks(record.node):  # what it published before it died: where its gap begins
-                self.watcher.take_outputs(record.node)
+                self._take_outputs(record.node)
             self.group.restart(old, f"[session] --- {record.node} died with exit status "
                                f"{status_text(record.exit_status)}: restart {record.restart} of "
                                f"{sup.max_restarts}, same command line; its output continues here ---")
@@ -565,9 +559,17 @@ class Supervision:
             self.console.say(gap_line(event))
         return False
 
+    def _take_outputs(self, node: str) -> Restart | None:
+        """Tell the supervisor the frames the receiver ``node`` published since the last take; the
+        restart whose gap they closed, if any."""
+        closed = None
+        for stamps in self.watcher.output_stamps(node):
+            closed = self.supervisor.output(node, stamps) or closed
+        return closed
+
     def _closed_gaps(self) -> list[Restart]:
         """The restarted receivers whose first new frame has come since the last call."""
-        closed = [self.watcher.take_outputs(node) for node in self.supervisor.watching()]
+        closed = [self._take_outputs(node) for node in self.supervisor.watching()]
         return [record for record in closed if record is not None]
 
     def report(self) -> None:
