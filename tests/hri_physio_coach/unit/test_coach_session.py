@@ -92,9 +92,11 @@ def session() -> Session:
     return s
 
 
-def test_whole_routine_runs_on_a_fake_clock_in_well_under_a_second(session: Session) -> None:
+def test_whole_routine_runs_on_a_fake_clock_without_waiting_in_real_time(session: Session) -> None:
     assert session.coach.engine.state == "finished"
-    assert session.wall < 1.0  # type: ignore[attr-defined]
+    # The routine is 23 min of session time; idle it runs in a fraction of a second (1.06 s seen on a
+    # busy machine): a bound far above that, and far below any real waiting, is not a timing test.
+    assert session.wall < 30.0  # type: ignore[attr-defined]
     assert session.events[0]["event"] == "session_start" and session.events[0]["duration"] == END
     end = session.of("session_end")
     assert len(end) == 1 and end[0]["t"] == END

@@ -37,8 +37,10 @@ def test_a_crashed_worker_ends_the_run_as_a_failure(tmp_path: Path) -> None:
         (toy / f"test_{name}_passing.py").write_text(PASSING)
     env = {k: v for k, v in os.environ.items() if not k.startswith(("PYTEST_", "HRI_PHYSIO_TEST"))}
     env["HRI_PHYSIO_TEST_WORKERS"] = "1"
+    # --rootdir: test ids relative to the toy suite wherever the repository is (pytest otherwise roots
+    # them at the common ancestor of the toy suite and the repository, e.g. /tmp for a clone there).
     run = subprocess.run(["bash", str(ROOT / "scripts" / "test"), str(toy), "-p", "no:cacheprovider",
-                          "--junitxml", str(tmp_path / "junit.xml")],
+                          "--rootdir", str(toy), "--junitxml", str(tmp_path / "junit.xml")],
                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=240)
     assert run.returncode == 1, run.stdout + run.stderr
     assert "crashed while running 'test_a_crash.py::test_crash'" in run.stdout, run.stdout
