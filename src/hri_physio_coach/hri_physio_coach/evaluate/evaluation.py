@@ -17,9 +17,8 @@ from hri_physio_coach.evaluate.plots import plot_in_zone, plot_traces
 from hri_physio_coach.evaluate.runner import Result, Task, run_tasks
 from hri_physio_coach.evaluate.simulation import SessionSpec
 from hri_physio_coach.evaluate.summary import (
-    GOALS,
     comparisons,
-    goals_met,
+    missed_goals,
     sensitivity,
     summarise,
     summary_markdown,
@@ -120,16 +119,17 @@ def _sensitivity(cfg: EvaluateConfig, people: list[ParticipantParams], policies:
 
 def headline(ev: Evaluation) -> str:
     """A few lines for the terminal."""
-    lines = [f"{'policy':<12} {'n':>4} {'median':>7} {'mean':>6} {'p10':>6} {'reach.':>7} {'>HRR70 s':>8} "
+    lines = [f"{'policy':<12} {'n':>4} {'median':>7} {'mean':>6} {'p10':>6} {'reach.':>7} {'p10 r.':>6} "
+             f"{'>HRR70 s':>8} "
              f"{'p90 s':>6} {'>=thr':>6} {'adapt/10':>8} {'cd HRR':>6} {'unreach':>7}  goals (issue 24)"]
     for _, r in ev.summary.iterrows():
         def pct(x: float) -> str:
             return "-" if not math.isfinite(x) else f"{100 * x:.1f}"
-        met = goals_met(r)
-        missed = [c for c, _, _ in GOALS if not met[c]]
+        missed = missed_goals(r)
         lines.append(f"{r['policy']:<12} {r['n']:>4} {pct(r['in_zone_median']):>7} "
                      f"{pct(r['in_zone_mean']):>6} {pct(r['in_zone_p10']):>6} "
-                     f"{pct(r['in_zone_mean_reachable']):>7} {r['above_hrr70_s_median']:>8.0f} "
+                     f"{pct(r['in_zone_mean_reachable']):>7} {pct(r['in_zone_p10_reachable']):>6} "
+                     f"{r['above_hrr70_s_median']:>8.0f} "
                      f"{r['above_hrr70_s_p90']:>6.0f} {pct(r['at_least_threshold_share']):>6} "
                      f"{r['adaptations_per_10min_median']:>8.1f} {r['cooldown_end_frac_hrr_median']:>6.2f} "
                      f"{pct(r['unreachable_share']):>7}  "

@@ -1,7 +1,10 @@
-"""Per-session metrics, from what the coach recorded and the strap's heart rate.
+"""Per-session metrics, from what the coach recorded and the participant's heart rate.
 
-Heart rate is the strap's 1 Hz value (what the coach receives) smoothed over the last 5 s;
-the zone is the one the coach announced (its calibrated HR_rest and age-predicted HR_max).
+Heart rate is the participant's true heart rate (the model's, at the strap's 1 Hz report times):
+what the coach controls. The strap's value (what the coach receives: jitter, artefacts, dropouts)
+smoothed over the last 5 s is kept beside it as ``in_zone_strap``, what a study that has only the
+strap would measure. The zone is the one the coach announced (its calibrated HR_rest and
+age-predicted HR_max).
 Every sample stands for one second. Phases come from the coach's ``phase`` events;
 adaptations are the coach's decisions that changed the ladder step or the activity cost it
 holds (rule updates and phase plans), counted in the phase they were made in.
@@ -66,8 +69,10 @@ def session_metrics(run: SessionRun, reach: Reach | None = None) -> dict[str, An
     low, high, rest, hrr = float(zone["low"]), float(zone["high"]), float(zone["hr_rest"]), float(zone["hrr"])
     centre = 0.5 * (low + high)
     spans = phase_spans(run)
-    hr = smoothed(run.hr)
+    hr = run.model_hr
     inside = (hr >= low) & (hr <= high)
+    strap = smoothed(run.hr)
+    strap_inside = (strap >= low) & (strap <= high)
     p = run.spec.params
     row: dict[str, Any] = {
         "model": p.model, "variant": run.spec.variant, "policy": run.spec.policy,
@@ -83,13 +88,14 @@ def session_metrics(run: SessionRun, reach: Reach | None = None) -> dict[str, An
         mask = (run.t >= start) & (run.t < end)
         row[f"in_zone_{kind}"] = float(inside[mask].mean()) if mask.any() else math.nan
     row["in_zone"] = row["in_zone_conditioning"]
+    c0, c1 = spans.get("conditioning", (math.nan, math.nan))
+    cond = (run.t >= c0) & (run.t < c1)
+    row["in_zone_strap"] = float(strap_inside[cond].mean()) if cond.any() else math.nan
     exercise = (run.t >= ex_start) & (run.t < ex_end)
     first = np.flatnonzero(exercise & inside)
     row["time_to_zone_s"] = float(run.t[first[0]] - ex_start) if len(first) else math.nan
     row["above_hrr70_s"] = int(np.sum(exercise & (hr > high)))
     row["above_85_hrmax_s"] = int(np.sum(exercise & (hr > 0.85 * p.hr_max_true)))
-    c0, c1 = spans.get("conditioning", (math.nan, math.nan))
-    cond = (run.t >= c0) & (run.t < c1)
     row["rms_to_centre_bpm"] = float(np.sqrt(np.mean((hr[cond] - centre) ** 2))) if cond.any() else math.nan
     changes = adaptations(run)
     for kind in EXERCISE:
@@ -100,7 +106,7 @@ def session_metrics(run: SessionRun, reach: Reach | None = None) -> dict[str, An
     row["reversals"] = sum(1 for a, b in itertools.pairwise(directions) if a != b)
     d1 = spans.get("cool_down", (math.nan, math.nan))[1]
     tail = (run.t >= d1 - SMOOTHING_S) & (run.t < d1)
-    end_hr = float(run.hr[tail].mean()) if tail.any() else math.nan
+    end_hr = float(hr[tail].mean()) if tail.any() else math.nan
     row["cooldown_end_hr"] = end_hr
     row["cooldown_end_frac_hrr"] = (end_hr - rest) / hrr
     row["activity_substitutions"] = len(run.of("activity_choice"))

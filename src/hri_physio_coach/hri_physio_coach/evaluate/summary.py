@@ -1,9 +1,11 @@
 """From per-session rows to the per-policy summary, the paired comparisons and the sensitivity table.
 
-* ``in_zone_*``: fraction (0-1) of conditioning time with the 5-s smoothed heart rate in the
+* ``in_zone_*``: fraction (0-1) of conditioning time with the participant's true heart rate in the
   coach's zone; the CI is a percentile bootstrap (95 %) of the median, seeded.
-* ``in_zone_mean_reachable``: the mean over the people whose zone the policy's controls can
-  reach (:mod:`~hri_physio_coach.evaluate.reach`); ``unreachable_share`` is the rest.
+  ``in_zone_strap_median``: the same median on the strap's 5-s smoothed heart rate (artefacts in).
+* ``in_zone_mean_reachable``, ``in_zone_p10_reachable``: the mean and the tenth percentile over the
+  people whose zone the policy's controls can reach (:mod:`~hri_physio_coach.evaluate.reach`);
+  ``unreachable_share`` is the rest.
 * Paired comparisons: every policy against a reference on the same people; Wilcoxon
   signed-rank test (scipy, two-sided) on the per-person differences.
 """
@@ -20,7 +22,8 @@ from scipy import stats
 
 SUMMARY_COLUMNS = (
     "policy", "n", "in_zone_median", "in_zone_mean", "in_zone_ci_low", "in_zone_ci_high",
-    "in_zone_p10", "in_zone_mean_reachable", "above_hrr70_s_median", "above_hrr70_s_p90",
+    "in_zone_p10", "in_zone_mean_reachable", "in_zone_p10_reachable", "in_zone_strap_median",
+    "above_hrr70_s_median", "above_hrr70_s_p90",
     "adaptations_per_10min_median", "cooldown_end_frac_hrr_median", "unreachable_share",
     "at_least_threshold_share",
 )
@@ -62,11 +65,15 @@ def summarise(sessions: pd.DataFrame, seed: int, policies: Sequence[str] | None 
         x = s["in_zone"].to_numpy(dtype=float)
         low, high = median_ci(x, seed, resamples)
         reachable = s[s["reachable"].astype(bool)]
+        x_reachable = reachable["in_zone"].to_numpy(dtype=float)
         rows.append({
             "policy": policy, "n": len(s), "in_zone_median": float(np.nanmedian(x)),
             "in_zone_mean": float(np.nanmean(x)), "in_zone_ci_low": low, "in_zone_ci_high": high,
             "in_zone_p10": float(np.nanpercentile(x, 10)) if np.isfinite(x).any() else math.nan,
             "in_zone_mean_reachable": float(reachable["in_zone"].mean()) if len(reachable) else math.nan,
+            "in_zone_p10_reachable": (float(np.nanpercentile(x_reachable, 10))
+                                      if np.isfinite(x_reachable).any() else math.nan),
+            "in_zone_strap_median": float(s["in_zone_strap"].median()),
             "above_hrr70_s_median": float(s["above_hrr70_s"].median()),
             "above_hrr70_s_p90": float(s["above_hrr70_s"].quantile(0.9)),
             "adaptations_per_10min_median": float(s["adaptations_per_10min"].median()),
@@ -110,6 +117,25 @@ def goals_met(row: pd.Series) -> dict[str, bool]:
     return out
 
 
+def p10_out_of_reach(row: pd.Series) -> bool:
+    """More than a tenth of the people cannot reach the zone at any setting of the policy's controls:
+    the tenth percentile is then one of them, whatever the policy does."""
+    return float(row["unreachable_share"]) > 0.10
+
+
+def missed_goals(row: pd.Series) -> list[str]:
+    """The goals a summary row misses; a missed p10 says when no policy could meet it."""
+    met = goals_met(row)
+    missed = []
+    for column, _, _ in GOALS:
+        if met[column] or (column == "at_least_threshold_share" and row["policy"] == "threshold"):
+            continue
+        if column == "in_zone_p10" and p10_out_of_reach(row):
+            column += f" ({100 * float(row['unreachable_share']):.1f} % out of reach)"
+        missed.append(column)
+    return missed
+
+
 def goals_table(summary: pd.DataFrame) -> pd.DataFrame:
     """One row per policy: each goal's figure with 'ok' or 'MISSED'."""
     rows = []
@@ -117,7 +143,10 @@ def goals_table(summary: pd.DataFrame) -> pd.DataFrame:
         met = goals_met(r)
         row: dict[str, Any] = {"policy": r["policy"]}
         for column, op, value in GOALS:
-            row[f"{column} {op} {value:g}"] = f"{_cell(float(r[column]))} {'ok' if met[column] else 'MISSED'}"
+            verdict = "ok" if met[column] else "MISSED"
+            if column == "in_zone_p10" and not met[column] and p10_out_of_reach(r):
+                verdict += f" ({_cell(100 * float(r['unreachable_share']))} % out of reach)"
+            row[f"{column} {op} {value:g}"] = f"{_cell(float(r[column]))} {verdict}"
         row["all"] = "yes" if all(met.values()) else "no"
         rows.append(row)
     return pd.DataFrame(rows)
@@ -126,24 +155,22 @@ def goals_table(summary: pd.DataFrame) -> pd.DataFrame:
 def models_table(summaries: Sequence[tuple[str, pd.DataFrame]]) -> str:
     """Markdown: one row per (participant model, policy) of ``hri_physio_evaluate`` summaries, with the
     goals each row misses (for README and docs/EVALUATION.md: generated, not typed)."""
-    head = ("| model | policy | median | p10 | mean | mean, reachable | s above HRR70 (p90) | >= threshold "
-            "| adaptations / 10 min (median) | unreachable | goals missed |")
-    lines = [head, "|" + "---|" * 11]
+    head = ("| model | policy | median | p10 | mean | mean, reachable | p10, reachable | s above HRR70 (p90) "
+            "| >= threshold | adaptations / 10 min (median) | unreachable | median, strap | goals missed |")
+    lines = [head, "|" + "---|" * 13]
     for model, summary in summaries:
         for _, r in summary.iterrows():
-            met = goals_met(r)
-            missed = [c for c, _, _ in GOALS if not met[c]]
-            if r["policy"] == "threshold":
-                missed = [c for c in missed if c != "at_least_threshold_share"]
+            missed = missed_goals(r)
 
             def pct(x: float) -> str:
                 return "-" if not math.isfinite(x) else f"{100 * x:.1f} %"
             lines.append(
                 f"| {model} | {r['policy']} | {pct(r['in_zone_median'])} | {pct(r['in_zone_p10'])} | "
                 f"{pct(r['in_zone_mean'])} | {pct(r['in_zone_mean_reachable'])} | "
-                f"{r['above_hrr70_s_p90']:.0f} | "
+                f"{pct(r['in_zone_p10_reachable'])} | {r['above_hrr70_s_p90']:.0f} | "
                 f"{pct(r['at_least_threshold_share'])} | {r['adaptations_per_10min_median']:.1f} | "
-                f"{pct(r['unreachable_share'])} | {', '.join(missed) if missed else 'none'} |")
+                f"{pct(r['unreachable_share'])} | {pct(r['in_zone_strap_median'])} | "
+                f"{', '.join(missed) if missed else 'none'} |")
     return "\n".join(lines)
 
 
@@ -202,10 +229,11 @@ def summary_markdown(summary: pd.DataFrame, comps: pd.DataFrame, sens: pd.DataFr
         "",
         f"Command: `{command}`",
         "",
-        "In-zone = fraction of conditioning time with the 5-s smoothed heart rate inside the coach's zone "
-        "(HRR40-HRR70 of its calibrated rest and age-predicted maximum). CI: bootstrap 95 % of the median. "
-        "`in_zone_mean_reachable`: mean over the people whose zone the policy's controls can reach in the "
-        "model; `unreachable_share`: the others.",
+        "In-zone = fraction of conditioning time with the participant's true heart rate inside the coach's "
+        "zone (HRR40-HRR70 of its calibrated rest and age-predicted maximum); `in_zone_strap_median`: the "
+        "same on the strap's 5-s smoothed heart rate, artefacts in. CI: bootstrap 95 % of the median. "
+        "`in_zone_mean_reachable`, `in_zone_p10_reachable`: mean and tenth percentile over the people whose "
+        "zone the policy's controls can reach in the model; `unreachable_share`: the others.",
         "",
         markdown_table(summary),
         "",

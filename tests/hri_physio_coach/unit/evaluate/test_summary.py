@@ -10,8 +10,12 @@ from scipy import stats
 from hri_physio_coach.evaluate.summary import (
     SUMMARY_COLUMNS,
     comparisons,
+    goals_met,
+    goals_table,
     markdown_table,
     median_ci,
+    missed_goals,
+    models_table,
     paired,
     sensitivity,
     summarise,
@@ -28,6 +32,7 @@ def sessions(variant: str = "main", shift: float = 0.2) -> pd.DataFrame:
                       ("predictive", np.minimum(base + shift, 1.0))):
         for i in range(n):
             rows.append({"variant": variant, "policy": policy, "participant": i, "in_zone": float(x[i]),
+                         "in_zone_strap": float(x[i]) - 0.05,
                          "reachable": i % 4 != 0, "above_hrr70_s": i % 3, "adaptations_per_10min": 1.0,
                          "cooldown_end_frac_hrr": 0.3})
     return pd.DataFrame(rows)
@@ -46,6 +51,9 @@ def test_summary_columns_and_values() -> None:
     assert row["in_zone_ci_low"] <= row["in_zone_median"] <= row["in_zone_ci_high"]
     reachable = df[(df.policy == "predictive") & df.reachable]["in_zone"]
     assert row["in_zone_mean_reachable"] == pytest.approx(reachable.mean())
+    assert row["in_zone_p10_reachable"] == pytest.approx(np.percentile(reachable, 10))
+    assert row["in_zone_p10_reachable"] != pytest.approx(row["in_zone_p10"])
+    assert row["in_zone_strap_median"] == pytest.approx(x.median() - 0.05)
     assert row["unreachable_share"] == pytest.approx(0.25)
     assert row["above_hrr70_s_median"] == 1.0
     assert winner(s) == "predictive"
@@ -85,3 +93,37 @@ def test_markdown_table() -> None:
     df = pd.DataFrame([{"policy": "a", "x": 0.12345, "ok": True, "p": 0.000123}])
     assert markdown_table(df, p_columns=("p",)).splitlines() == [
         "| policy | x | ok | p |", "|---|---|---|---|", "| a | 0.123 | yes | 0.00012 |"]
+
+
+def goal_row(policy: str = "adaptive", p10: float = 0.9, unreachable: float = 0.05, **figures: float) -> pd.Series:
+    row = {"policy": policy, "in_zone_median": 0.99, "in_zone_mean": 0.95, "in_zone_p10": p10,
+           "in_zone_mean_reachable": 0.98, "in_zone_p10_reachable": 0.95, "in_zone_strap_median": 0.97,
+           "above_hrr70_s_p90": 10.0, "at_least_threshold_share": 0.97, "adaptations_per_10min_median": 1.0,
+           "unreachable_share": unreachable}
+    return pd.Series({**row, **figures})
+
+
+def test_goals_are_checked_against_each_limit_and_a_missed_p10_says_when_no_policy_could_meet_it() -> None:
+    assert all(goals_met(goal_row()).values())
+    assert missed_goals(goal_row()) == []
+    assert missed_goals(goal_row(in_zone_median=0.979, above_hrr70_s_p90=31.0)) == [
+        "in_zone_median", "above_hrr70_s_p90"]
+    # p10 missed while nine people in ten could reach the zone: the policy's miss, said plainly.
+    assert missed_goals(goal_row(p10=0.5, unreachable=0.08)) == ["in_zone_p10"]
+    # More than a tenth cannot reach it at any setting: the tenth percentile is one of them.
+    assert missed_goals(goal_row(p10=0.0, unreachable=0.125)) == ["in_zone_p10 (12.5 % out of reach)"]
+    # Threshold is the reference: "at least as good as threshold" is not a goal it can miss.
+    assert missed_goals(goal_row("threshold", at_least_threshold_share=0.5)) == []
+    assert missed_goals(goal_row("fuzzy", at_least_threshold_share=0.5)) == ["at_least_threshold_share"]
+
+
+def test_goals_and_models_tables_show_each_figure_and_what_is_missed() -> None:
+    summary = pd.DataFrame([goal_row(), goal_row("predictive", p10=0.0, unreachable=0.125)])
+    table = goals_table(summary).set_index("policy")
+    assert table.loc["adaptive", "all"] == "yes"
+    assert table.loc["predictive", "in_zone_p10 >= 0.85"] == "0 MISSED (12.5 % out of reach)"
+    assert table.loc["predictive", "in_zone_median >= 0.98"] == "0.99 ok"
+    lines = models_table([("vagal", summary)]).splitlines()
+    assert len(lines) == 4 and all(line.count("|") == 14 for line in lines)
+    assert lines[2].startswith("| vagal | adaptive | 99.0 % | 90.0 % |") and lines[2].endswith("| none |")
+    assert "| 97.0 % | in_zone_p10 (12.5 % out of reach) |" in lines[3]
