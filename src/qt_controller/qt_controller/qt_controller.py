@@ -4,7 +4,9 @@ It runs unchanged against mock_qt_robot, which serves the same names. Checks hap
 here, before anything is sent: emotion names against the catalogue, joint commands
 against the joint limits, and (``require_listeners``) that someone listens on a topic,
 so a researcher is told "nobody listens on /qt_robot/emotion/show" instead of a command
-silently going nowhere. Topic sends wait up to ``discovery_timeout`` for a listener and
+silently going nowhere. The robot's joint states (30 a second) are taken only when a ``get state``
+asks for them (:class:`~hri_physio_bridge.ros_tools.TakenOnDemand`): the middleware keeps the newest
+one, and no callback wakes the node for each. Topic sends wait up to ``discovery_timeout`` for a listener and
 service calls up to ``service_timeout`` (wall-clock seconds, as they bound transport and
 discovery, not robot behaviour). Commands go out reliable and KEEP_ALL (``command_qos``):
 a burst of them reaches the robot whole.
@@ -20,12 +22,14 @@ from typing import Any
 
 from rclpy.node import Node
 from rclpy.publisher import Publisher
+from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, String
 
 from hri_physio_bridge import topics
 from hri_physio_bridge.config import ConfigError
 from hri_physio_bridge.qos import command_qos, latched_qos
+from hri_physio_bridge.ros_tools import TakenOnDemand
 from hri_physio_bridge.waiting import Clock, wait_until
 from qt_controller import qt_services
 from qt_controller.config import QtRobotOptions
@@ -59,7 +63,8 @@ class QtController(RobotInterface):
         self.emotions = EmotionCatalogue()
         self._clock = clock
         self._lock = threading.Lock()
-        self._joint_state: JointState | None = None
+        self._joint_state: JointState | None = None  # the newest taken so far
+        self._joint_states: TakenOnDemand | None = None
         self._emotion: tuple[str, float] | None = None
         self._velocity: dict[str, float] = {}
         self._pubs: dict[str, Publisher] = {}
@@ -100,14 +105,19 @@ class QtController(RobotInterface):
             self._pubs[key] = self.node.create_publisher(String, topic, latched_qos())
         for part in PARTS:
             self._pubs[part] = self.node.create_publisher(Float64MultiArray, part_topic(part), command_qos())
-        self.node.create_subscription(JointState, topics.QT_JOINT_STATE, self._on_joint_state, 10)
+        if self._joint_states is None:
+            self._joint_states = TakenOnDemand(f"{self.node.get_name()}_joint_states", self.node.context)
+            self._joint_states.subscribe("joints", JointState, topics.QT_JOINT_STATE, QoSProfile(depth=1))
         self._configured = True
         backend = services["gesture"].backend
         return Outcome.success(f"QT robot interface ready (service backend: {backend})", backend=backend)
 
-    def _on_joint_state(self, msg: JointState) -> None:
+    def close(self) -> None:
+        """Destroy the joint-state subscription's node (the publishers go with the caller's node)."""
         with self._lock:
-            self._joint_state = msg
+            if self._joint_states is not None:
+                self._joint_states.destroy()
+                self._joint_states = None
 
     # ------------------------------------------------------------------ helpers
     def _send(self, key: str, msg: Any, what: str) -> Outcome:
@@ -202,6 +212,10 @@ class QtController(RobotInterface):
 
     def _latest_joints(self) -> tuple[dict[str, float], dict[str, float], float] | None:
         with self._lock:
+            if self._joint_states is not None:
+                taken = self._joint_states.take("joints")
+                if taken:
+                    self._joint_state = taken[-1]
             msg = self._joint_state
         if msg is None:
             return None

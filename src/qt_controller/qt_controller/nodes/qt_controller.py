@@ -95,6 +95,7 @@ class QtControllerNode(ManagedNode):
 
     def close(self) -> None:
         self.output.wait_for_all_acked(Duration(seconds=1))  # let the last replies (e.g. to exit) out
+        self.robot.close()
 
 
 def _console(node: QtControllerNode, stream: Any = None) -> None:
