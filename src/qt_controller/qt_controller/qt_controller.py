@@ -4,12 +4,12 @@ It runs unchanged against mock_qt_robot, which serves the same names. Checks hap
 here, before anything is sent: emotion names against the catalogue, joint commands
 against the joint limits, and (``require_listeners``) that someone listens on a topic,
 so a researcher is told "nobody listens on /qt_robot/emotion/show" instead of a command
-silently going nowhere. The robot's joint states (30 a second) are taken only when a ``get state``
-asks for them (:class:`~hri_physio_bridge.ros_tools.TakenOnDemand`): the middleware keeps the newest
-one, and no callback wakes the node for each. Topic sends wait up to ``discovery_timeout`` for a listener and
+silently going nowhere. Topic sends wait up to ``discovery_timeout`` for a listener and
 service calls up to ``service_timeout`` (wall-clock seconds, as they bound transport and
 discovery, not robot behaviour). Commands go out reliable and KEEP_ALL (``command_qos``):
-a burst of them reaches the robot whole.
+a burst of them reaches the robot whole. The robot's joint states (30 a second) are taken only
+when a ``get state`` asks for them (:class:`~hri_physio_bridge.ros_tools.TakenOnDemand`): the
+middleware keeps the newest, and no callback wakes the node for each.
 """
 
 from __future__ import annotations

@@ -237,7 +237,9 @@ def summary_markdown(summary: pd.DataFrame, comps: pd.DataFrame, sens: pd.DataFr
         "zone (HRR40-HRR70 of its calibrated rest and age-predicted maximum); `in_zone_strap_median`: the "
         "same on the strap's 5-s smoothed heart rate, artefacts in. CI: bootstrap 95 % of the median. "
         "`in_zone_mean_reachable`, `in_zone_p10_reachable`: mean and tenth percentile over the people whose "
-        "zone the policy's controls can reach in the model; `unreachable_share`: the others.",
+        "zone the policy's controls can reach in the model; `unreachable_share`: the others; "
+        "`out_of_reach_share`: those every setting leaves below (or above) the zone. A missed p10 says "
+        "'out of reach' when that share is over 10 %: no policy with these controls could meet it.",
         "",
         markdown_table(summary),
         "",
