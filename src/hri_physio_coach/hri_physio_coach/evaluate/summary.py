@@ -127,6 +127,13 @@ def p10_out_of_reach(row: pd.Series) -> bool:
     return float(row["out_of_reach_share"]) > 0.10
 
 
+def _out_of_reach_note(row: pd.Series) -> str:
+    """What a missed p10 adds when no policy could meet it ("" when one could)."""
+    if not p10_out_of_reach(row):
+        return ""
+    return f" ({100 * float(row['out_of_reach_share']):.1f} % out of reach)"
+
+
 def missed_goals(row: pd.Series) -> list[str]:
     """The goals a summary row misses; a missed p10 says when no policy could meet it."""
     met = goals_met(row)
@@ -134,9 +141,7 @@ def missed_goals(row: pd.Series) -> list[str]:
     for column, _, _ in GOALS:
         if met[column] or (column == "at_least_threshold_share" and row["policy"] == "threshold"):
             continue
-        if column == "in_zone_p10" and p10_out_of_reach(row):
-            column += f" ({100 * float(row['out_of_reach_share']):.1f} % out of reach)"
-        missed.append(column)
+        missed.append(column + (_out_of_reach_note(row) if column == "in_zone_p10" else ""))
     return missed
 
 
@@ -148,8 +153,8 @@ def goals_table(summary: pd.DataFrame) -> pd.DataFrame:
         row: dict[str, Any] = {"policy": r["policy"]}
         for column, op, value in GOALS:
             verdict = "ok" if met[column] else "MISSED"
-            if column == "in_zone_p10" and not met[column] and p10_out_of_reach(r):
-                verdict += f" ({_cell(100 * float(r['out_of_reach_share']))} % out of reach)"
+            if column == "in_zone_p10" and not met[column]:
+                verdict += _out_of_reach_note(r)
             row[f"{column} {op} {value:g}"] = f"{_cell(float(r[column]))} {verdict}"
         row["all"] = "yes" if all(met.values()) else "no"
         rows.append(row)
