@@ -47,6 +47,7 @@ ASSUMPTIONS = (
     Assumption("marching_mets", 3.0, 4.5, "cost of marching in place at 120 BPM (assumed 3.5 METs)"),
     Assumption("drift_amplitude", 0.03, 0.12, "cardiac drift amplitude (0.03-0.12 of HRR)"),
     Assumption("calibration_offset", 0.0, 6.0, "seated anticipation during calibration (3 +/- 3 bpm)"),
+    Assumption("lateral_cost", 0.85, 1.15, "lateral knee lifts' cost / step-ups' (one label, 1 +/- 0.1)"),
 )
 
 

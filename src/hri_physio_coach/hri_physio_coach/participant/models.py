@@ -9,7 +9,8 @@ the evaluation (``--model``) and the ``simulated_participant`` node (``model`` o
 
 ``vagal`` (:class:`VagalParams`, :class:`VagalKinetics`): HR-VO2 steady state (%HRR = %VO2R, ACSM;
 Swain & Leutholtz 1997) with the ACSM stepping equation, partial tempo adherence and a personal cadence
-cap; a per-person spread of each activity's cost around its MET label (Byrne et al. 2005); arm work
+cap; a per-person spread of each activity's cost around its MET label (Byrne et al. 2005; lateral knee
+lifts and step-ups share a label but not a cost); arm work
 raising HR more per unit of oxygen than leg work (Astrand & Saltin 1961); an on-response whose fast
 (vagal-withdrawal) part is capped at the intrinsic heart rate (Jose & Collison 1970) and whose slow
 part (tau 40-90 s, dead time 2-10 s) carries the rest; an off-response 1.2-2x slower; linear
@@ -51,6 +52,8 @@ from hri_physio_coach.participant.physiology import (
 
 #: Activities with arm work (both arms forward while stepping).
 ARM_ACTIVITIES = {"arms_forward"}
+#: Stepping sideways with a knee lift: labelled as costly as a step-up, but another movement.
+LATERAL = {"lateral"}
 #: ACSM: oxygen cost of raising 1 kg by 1 m (ml O2), of a step cycle's horizontal part per cycle (ml/kg).
 VERTICAL_COST = 1.8
 STEP_HORIZONTAL = 0.2
@@ -90,6 +93,7 @@ class VagalParams(ParticipantParams):
     cadence_cap: float = 132.0  # beats/min the person can step to at most
     marching_cost: float = 1.0  # the person's cost of marching / its MET label
     stepping_cost: float = 1.0  # the person's cost of stepping / the ACSM equation
+    lateral_cost: float = 1.0  # the person's cost of lateral knee lifts / of their step-ups (the same label)
     arm_hr_gain: float = 1.3  # HR per unit of oxygen of arm work / of leg work
     tau_vagal: float = 4.0  # s, the fast (vagal) part
     off_factor: float = 1.5  # off-response time constants / on-response ones
@@ -112,6 +116,8 @@ class VagalParams(ParticipantParams):
             return (self.marching_mets - 1.0) * REST_VO2 * cadence / 120.0 * self.marching_cost * pace, 0.0
         if activity.name in STEPPING:
             legs = (acsm_stepping_vo2(self.step_height, cadence / 4.0) - REST_VO2) * self.stepping_cost * pace
+            if activity.name in LATERAL:
+                legs *= self.lateral_cost
             arms = legs * self.arm_work if activity.name in ARM_ACTIVITIES else 0.0
             return legs, arms
         raise ValueError(f"unknown activity {activity.name!r}")
@@ -186,6 +192,7 @@ class VagalKinetics:
 def sample_vagal(n: int, seed: int, age_range: tuple[float, float] = (20.0, 50.0)) -> list[VagalParams]:
     """A seeded cohort of the ``vagal`` model (docs/PARTICIPANT_MODEL.md, "Alternative models")."""
     rng = np.random.default_rng([seed, 0xA6A1])
+    own = np.random.default_rng([seed, 0xA6A2])  # per-activity spread; the other draws stay as they were
     people = []
     for _ in range(n):
         age = float(rng.uniform(*age_range))
@@ -210,6 +217,7 @@ def sample_vagal(n: int, seed: int, age_range: tuple[float, float] = (20.0, 50.0
             arm_hr_gain=float(rng.uniform(1.1, 1.5)), tau_vagal=float(rng.uniform(2.0, 6.0)),
             off_factor=float(rng.uniform(1.2, 2.0)), drift_rate=float(rng.uniform(0.1, 0.3)),
             arrival_offset=float(rng.uniform(0.0, 10.0)),
+            lateral_cost=float(np.clip(own.normal(1.0, 0.1), 0.8, 1.2)),
         ))
     return people
 
@@ -383,8 +391,8 @@ class ModelInfo:
     params: type[ParticipantParams]
     sample: Callable[[int, int, tuple[float, float]], list[ParticipantParams]]
     about: str
-    #: The shared (ParticipantParams) fields the model's heart uses; None: all of them. A sensitivity
-    #: sweep moves only these (moving a field the model ignores would show nothing).
+    #: The fields of the sensitivity table's assumptions the model's heart uses; None: all of them. A
+    #: sensitivity sweep moves only these (moving a field the model ignores would show nothing).
     uses: frozenset[str] | None = None
 
 
@@ -394,7 +402,7 @@ MODELS: dict[str, ModelInfo] = {
     "vagal": ModelInfo("vagal", VagalParams, sample_vagal,  # type: ignore[arg-type]
                        "fast vagal part capped at the intrinsic HR, slow part, linear drift, cadence cap",
                        frozenset({"tempo_compliance", "gesture_gain", "tau_on", "dead_time", "marching_mets",
-                                  "arm_work", "step_height"})),
+                                  "arm_work", "step_height", "lateral_cost"})),
     "vo2drive": ModelInfo("vo2drive", Vo2Params, sample_vo2drive,  # type: ignore[arg-type]
                           "VO2 kinetics (phase I/II, slow component) -> HR by Swain's %HRmax-%VO2max",
                           frozenset({"tempo_compliance", "gesture_gain", "calibration_offset", "arm_work",

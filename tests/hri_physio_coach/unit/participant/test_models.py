@@ -50,6 +50,22 @@ def test_vagal_steady_state_is_the_acsm_hrr_vo2r_relation() -> None:
     assert hr[-1] == pytest.approx(expected, abs=0.3)
 
 
+def test_vagal_lateral_knee_lifts_cost_the_persons_own_share_of_a_step_up() -> None:
+    """One label (5.8 METs), two movements: each person's lateral knee lifts cost their step-ups' times
+    ``lateral_cost`` (sampled 1 +/- 0.1)."""
+    base = dict(age=30, hr_rest=65, hr_max_true=188, vo2max=42, step_height=0.15, tempo_compliance=1.0,
+                gesture_gain=0.0, drift_rate=0.0, arrival_offset=0.0, tau_on=60.0)
+    lateral = Activity("lateral", 120.0, 1.0)
+    same = VagalParams(**base)
+    assert same.settled_hr(lateral) == pytest.approx(same.settled_hr(STEP), rel=1e-12)
+    harder = VagalParams(lateral_cost=1.15, **base)
+    assert harder.settled_hr(lateral) - 65 == pytest.approx(1.15 * (harder.settled_hr(STEP) - 65), rel=1e-9)
+    assert harder.settled_hr(STEP) == same.settled_hr(STEP)
+    people = sample_vagal(200, 1)
+    spread = np.array([p.lateral_cost for p in people])
+    assert 0.08 < spread.std() < 0.12 and spread.min() >= 0.8 and spread.max() <= 1.2
+
+
 def test_vagal_fast_part_is_capped_at_the_intrinsic_heart_rate() -> None:
     base = dict(age=30, hr_max_true=188, vo2max=30, step_height=0.2, tempo_compliance=1.0, gesture_gain=0.0,
                 drift_rate=0.0, arrival_offset=0.0, tau_on=80.0, dead_time=5.0, tau_vagal=3.0)
@@ -165,4 +181,6 @@ def test_the_sensitivity_sweep_moves_only_what_a_model_uses() -> None:
     standard = {name.split("=")[0] for name, _ in variants(make_cohort(2, 1))}
     vo2 = {name.split("=")[0] for name, _ in variants(make_cohort(2, 1, model="vo2drive"))}
     assert {"tau_on", "tau_fast", "drift_amplitude"} <= standard
+    vagal = {name.split("=")[0] for name, _ in variants(make_cohort(2, 1, model="vagal"))}
     assert vo2 == {"tempo_compliance", "gesture_gain", "calibration_offset"}
+    assert "lateral_cost" in vagal and "lateral_cost" not in standard | vo2
