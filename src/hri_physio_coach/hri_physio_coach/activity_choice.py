@@ -26,6 +26,22 @@ class ActivityChoice:
             return ()
         return tuple(sorted({a.mets for a in self.routine.choices(phase.name) if a.mets is not None}))
 
+    def runs_at(self, phase: Phase | None) -> tuple[tuple[str, float], ...]:
+        """(name, cost) of what may run at each cost the coach can run in ``phase``: the phase's own
+        activities with that cost and the one performed now if it has it (it is kept), else the
+        routine's first with that cost. A policy that learns each activity predicts a cost from these."""
+        if phase is None:
+            return ()
+        out: dict[tuple[str, float], None] = {}
+        for level in self.levels(phase):
+            names = [a.name for a in phase.activities if a.mets == level]
+            if self.current is not None and self.current.mets == level:
+                names.append(self.current.name)
+            if not names:
+                names = [next(a.name for a in self.routine.choices(phase.name) if a.mets == level)]
+            out.update(dict.fromkeys((name, level) for name in names))
+        return tuple(out)
+
     def _pick(self, phase: Phase, slot: Activity, level: float | None) -> Activity:
         if level is None or slot.mets is None or slot.mets == level:
             return slot

@@ -707,6 +707,7 @@ class ExerciseCoach(Listener):
             speeds=self.ladder.speeds, tempos=self._tempos, index=self.ladder.index,
             window_start=window_start,
             routine_costs=self._routine_costs if self.adapter.chooses_activity else (),
+            runs_at=self.choice.runs_at(self.engine.phase) if self.adapter.chooses_activity else (),
         )
 
     def _plan_phase(self, phase: Phase, t: float) -> None:

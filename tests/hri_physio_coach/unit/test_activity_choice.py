@@ -72,3 +72,19 @@ def test_a_cost_must_be_a_number_of_mets(routine) -> None:
     activity["mets"] = 0.5
     with pytest.raises(RoutineError, match="mets must be a number >= 1"):
         parse_routine(bad)
+
+
+def test_what_may_run_at_each_cost_is_the_phases_own_and_what_is_performed_now(routine) -> None:
+    choice = ActivityChoice(routine)
+    warm, cond = routine.phase("warm"), routine.phase("cond")
+    assert choice.runs_at(None) == ()
+    assert choice.runs_at(warm) == (("march", 3.5), ("step", 5.8), ("arms", 6.3))  # arms: another phase's
+    choice.slot_started(warm, warm.activities[1], None)  # stepping at the end of the warm-up ...
+    # ... is kept in a conditioning slot of another cost while the policy holds 5.8: both may run at it.
+    assert choice.runs_at(cond) == (("march", 3.5), ("knees", 5.8), ("step", 5.8), ("arms", 6.3))
+    only_warm = parse_routine({"name": "r", "phases": [
+        ROUTINE["phases"][0],
+        {"name": "steps", "activities": [{"name": "knees", "duration": 60, "gesture": "lateral",
+                                          "mets": 5.8}]}]})
+    # A cost the phase has no activity for runs the routine's first with it (here the warm-up's march).
+    assert ActivityChoice(only_warm).runs_at(only_warm.phase("steps")) == (("march", 3.5), ("knees", 5.8))

@@ -7,18 +7,24 @@ easiest setting) and changes how it learns and decides:
 
 * **Online identification with uncertainty.** Every rule update re-fits
   :class:`~hri_physio_coach.policies.identification.ResponseEstimator` to all the windows seen: per
-  activity level a fast and a slow gain, the slow time constant (a continuous estimate with a prior,
+  activity (by name; activities with the same stated cost are tied a priori, as the label is only a
+  population mean) a fast and a slow gain, the slow time constant (a continuous estimate with a prior,
   no list of candidates) and the drift, each with its uncertainty. A setting's prediction is a band:
-  the settled heart rate +/- ``z`` standard deviations.
+  the settled heart rate +/- ``z`` standard deviations. A setting's activity cost stands for the
+  activities the coach may run at it in this phase (``Controls.runs_at``): their mean gain, the band
+  widened by half their spread.
 * **Choosing.** A setting is scored by the distance of its predicted mean from the target and by how
   far its band pokes out of the zone (out of the top counts ``over_weight`` times more).
 * **Overshoot guard.** When the window's heart rate is above the zone, or the fitted trajectory of the
   current setting crosses the zone's top within ``horizon`` s, the policy acts at this rule update,
   whatever the hold: it moves to an easier setting (the one scored best among those easier by label
-  or predicted lower than the current one). It never holds while heart rate is above the zone.
+  or predicted lower than the current one by a difference worth a switch: ``switch_gain`` more chance
+  of settling in the zone, or ``z`` SDs). It never holds while heart rate is above the zone.
 * **Stall guard.** Heart rate below the zone for ``stall`` s after the last change, and not predicted
-  to get in within ``horizon`` s: a harder setting (by label or by prediction), even if the model
-  predicted this one in the zone. A re-plan never picks a setting predicted lower while HR is below.
+  to get in within ``horizon`` s: a harder setting (by label, unless its own fit predicts it lower; or
+  predicted higher by a difference worth a switch), even if the model predicted this one in the
+  zone. A re-plan never picks a setting predicted lower while HR is below, nor another activity for a
+  difference not worth a switch.
 * **Labels until seen.** A level's gain is kept at least that of a level with a lower stated cost until
   it has been performed for ``trusted`` (120) s; after that its own fit counts (some people march harder
   than they step).
@@ -48,13 +54,14 @@ class AdaptivePolicy(PredictivePolicy):
 
     def __init__(self, target: float = 0.5, z: float = 1.0, margin: float = 0.1, hold: float = 60.0,
                  lead: float = 60.0, settle: float = 90.0, horizon: float = 30.0, stall: float = 90.0,
-                 over_weight: float = 3.0) -> None:
+                 over_weight: float = 3.0, switch_gain: float = 0.25) -> None:
         super().__init__(target=target, band=margin, hold=hold, lead=lead, settle=settle)
         self.z = z
         self.margin = margin  # fraction of the zone's width kept free at each side by the band
         self.horizon = horizon
         self.stall = stall
         self.over_weight = over_weight
+        self.switch_gain = switch_gain  # gain in the chance of settling in the zone a switch must bring
         self.model = ResponseEstimator(rest=70.0)  # type: ignore[assignment]
         self.fit: Estimate | None = None  # type: ignore[assignment]
         self.gap: tuple[Setting, Setting] | None = None  # (above, below) alternated
@@ -63,43 +70,80 @@ class AdaptivePolicy(PredictivePolicy):
         self.gap_said = False
         self.trusted = 120.0  # s of a level performed after which its own fit is trusted over its label
         self.now = 0.0  # time of the rule update being decided
+        self.runs_at: dict[Hashable, tuple[Hashable, ...]] = {}  # cost -> activities that may run at it
 
     # --- the identified response ------------------------------------------------------------------
+    def observe(self, t: float, c: Controls) -> None:
+        """Identify each activity on its own (its name; its stated cost ties it to the others a priori)."""
+        self._see(c)
+        level = self.level_of(c)
+        if level is None:
+            return
+        key = c.activity if c.activity is not None else level
+        self.model.set(t, key, self.drive(c, c.index), cost=c.mets)  # type: ignore[call-arg]
+
+    def _see(self, c: Controls) -> None:
+        """Which activities may run at each cost in this phase (the coach's choice of activity)."""
+        if c.runs_at:
+            by_level: dict[Hashable, list[Hashable]] = {}
+            for name, cost in c.runs_at:
+                by_level.setdefault(cost, []).append(name)
+                self.model.costs.setdefault(name, cost)
+            self.runs_at = {lv: tuple(names) for lv, names in by_level.items()}
+
     def fit_now(self, t: float) -> Estimate | None:  # type: ignore[override]
         self.now = t
         self.fit = self.model.fit(t)
         return self.fit
 
-    def _scaled(self, level: Hashable) -> tuple[float, float] | None:
-        """(gain, sd) of a level not performed yet: the nearest performed one scaled by the net METs."""
-        est = self.fit
-        if est is None or not isinstance(level, int | float):
-            return None
-        known = [lv for lv in est.levels if isinstance(lv, int | float) and lv > 1.0]
-        if not known:
-            return None
-        ref = min(known, key=lambda lv: abs(lv - level))
-        ratio = (level - 1.0) / (ref - 1.0)
-        g, sd = est.gain(ref), est.gain_sd(ref)
-        assert g is not None and sd is not None
-        return g * ratio, math.hypot(sd * ratio, 0.15 * g * ratio)  # the METs labels are rough
+    def keys(self, level: Hashable) -> tuple[Hashable, ...]:
+        """The identified activities a setting's level stands for: those that may run at that cost now,
+        else those seen with that cost, else the level itself."""
+        if level in self.runs_at:
+            return self.runs_at[level]
+        seen = tuple(k for k in self.model.levels_seen() if k != level and self.model.cost_of(k) == level)
+        return seen or (level,)
 
-    def _raw_gain(self, level: Hashable) -> float | None:
+    def _activity(self, key: Hashable) -> tuple[float, float] | None:
+        """(gain, sd) of one activity: its fit, or, not performed yet, the nearest performed one by stated
+        cost scaled by the net METs (the labels are rough: 15 % more spread)."""
         est = self.fit
         if est is None:
             return None
-        g = est.gain(level)
-        if g is not None:
-            return g
-        scaled = self._scaled(level)
-        return None if scaled is None else scaled[0]
+        g, sd = est.gain(key), est.gain_sd(key)
+        if g is not None and sd is not None:
+            return g, sd
+        cost = self.model.cost_of(key)
+        known = [(c, k) for k in est.levels if (c := self.model.cost_of(k)) is not None]
+        if cost is None or not known:
+            return None
+        ref_cost, ref = min(known, key=lambda ck: abs(ck[0] - cost))
+        ratio = (cost - 1.0) / (ref_cost - 1.0)
+        g, sd = est.gain(ref), est.gain_sd(ref)
+        assert g is not None and sd is not None
+        return g * ratio, math.hypot(sd * ratio, 0.15 * g * ratio)
+
+    def _level(self, level: Hashable) -> tuple[float, float] | None:
+        """(gain, sd) of a level: the mean of its activities', the sd widened by half their spread (which
+        of them runs depends on the slot)."""
+        parts = [a for k in self.keys(level) if (a := self._activity(k)) is not None]
+        if not parts:
+            return None
+        gains = [g for g, _ in parts]
+        sd = math.sqrt(sum(s * s for _, s in parts) / len(parts))
+        return sum(gains) / len(gains), math.hypot(sd, 0.5 * (max(gains) - min(gains)))
+
+    def _raw_gain(self, level: Hashable) -> float | None:
+        found = self._level(level)
+        return None if found is None else found[0]
 
     def seen_for(self, level: Hashable, now: float) -> float:
-        """Seconds ``level`` has been performed so far."""
+        """Seconds ``level`` (any of its activities) has been performed so far."""
+        keys = set(self.keys(level))
         settings = self.model.settings
         total = 0.0
         for i, (t0, lv, _) in enumerate(settings):
-            if lv == level:
+            if lv in keys:
                 t1 = settings[i + 1][0] if i + 1 < len(settings) else now
                 total += max(0.0, min(t1, now) - t0)
         return total
@@ -113,22 +157,17 @@ class AdaptivePolicy(PredictivePolicy):
             return g
         if self.seen_for(level, self.now) >= self.trusted:
             return g
-        easier = [lv for lv in self.fit.levels if isinstance(lv, int | float) and lv < level]
-        for lv in easier:
-            other = self._raw_gain(lv)
-            if other is not None:
-                g = max(g, other)
+        costs = {c for k in self.fit.levels if (c := self.model.cost_of(k)) is not None} | set(self.runs_at)
+        for lv in costs:
+            if isinstance(lv, int | float) and lv < level:
+                other = self._raw_gain(lv)
+                if other is not None:
+                    g = max(g, other)
         return g
 
     def gain_sd(self, level: Hashable) -> float | None:
-        est = self.fit
-        if est is None:
-            return None
-        sd = est.gain_sd(level)
-        if sd is not None:
-            return sd
-        scaled = self._scaled(level)
-        return None if scaled is None else scaled[1]
+        found = self._level(level)
+        return None if found is None else found[1]
 
     def drift_now(self, t: float) -> float:
         """Drift reached by now (bpm): the fitted rate times the minutes of exercise, never negative."""
@@ -138,6 +177,7 @@ class AdaptivePolicy(PredictivePolicy):
         return max(self.fit.drift, 0.0) * max(minutes, 0.0)
 
     def predict(self, inp: RuleInput, c: Controls, s: Setting) -> float | None:
+        self._see(c)
         g = self.gain(s.level)
         if g is None:
             return None
@@ -151,6 +191,7 @@ class AdaptivePolicy(PredictivePolicy):
 
     def spread(self, c: Controls, s: Setting) -> float:
         """SD (bpm) of a setting's predicted settled heart rate."""
+        self._see(c)
         sd = self.gain_sd(s.level)
         noise = self.fit.sigma if self.fit is not None else 0.0
         return math.hypot((sd or 0.0) * self.drive(c, s.index), noise)
@@ -258,21 +299,52 @@ class AdaptivePolicy(PredictivePolicy):
         now = self.predict(inp, c, current)
         if self.gap is not None and current == self.gap[0]:
             return self._gap_step(inp, c)
-        # Easier by label, whatever the model predicts (it just missed), or predicted easier: the model ranks.
+        # Easier by label, whatever the model predicts (it just missed), or confidently predicted easier.
         lower = [s for s in self.candidates(c) if self.nominal(c, s) < self.nominal(c, current) - 1e-9
-                 or ((m := self.predict(inp, c, s)) is not None and now is not None and m < now - 1.0)]
+                 or self._apart(inp, c, current, s) < 0]
         scored = self._scored(inp, c, lower)
         if not scored:
             return self._out_of_reach(inp, c, now, inp.t - self.last_change)
         self.gap = None
         return self._move(inp, c, min(scored, key=lambda x: x[0])[2], why)
 
+    def _in_zone_chance(self, inp: RuleInput, c: Controls, s: Setting, m: float) -> float:
+        """Probability that ``s`` settles inside the zone, its prediction ``m`` +/- its spread (normal)."""
+        sd = max(self.spread(c, s), 1e-6)
+
+        def below(x: float) -> float:
+            return 0.5 * (1.0 + math.erf((x - m) / (sd * math.sqrt(2.0))))
+
+        return below(inp.zone.high) - below(inp.zone.low)
+
+    def _apart(self, inp: RuleInput, c: Controls, current: Setting, s: Setting) -> int:
+        """+1 / -1 when moving to ``s`` is worth its transient: predicted higher / lower than ``current``
+        by 1 bpm at least, and either ``switch_gain`` likelier to settle in the zone, or ``z`` SDs of the
+        difference away and no less likely; else 0 (a guess 1 bpm apart that changes little, or a sure
+        move out of the zone, is no reason to switch)."""
+        m, now = self.predict(inp, c, s), self.predict(inp, c, current)
+        if m is None or now is None or abs(m - now) <= 1.0:
+            return 0
+        gain = self._in_zone_chance(inp, c, s, m) - self._in_zone_chance(inp, c, current, now)
+        need = self.z * math.hypot(self.spread(c, s), self.spread(c, current))
+        if gain < self.switch_gain and (abs(m - now) <= need or gain < -0.05):
+            return 0
+        return 1 if m > now else -1
+
+    def _lower(self, inp: RuleInput, c: Controls, current: Setting, s: Setting) -> bool:
+        """``s`` is predicted to settle more than 1 bpm below ``current``."""
+        m, now = self.predict(inp, c, s), self.predict(inp, c, current)
+        return m is not None and now is not None and m < now - 1.0
+
     def _harder(self, inp: RuleInput, c: Controls, why: str) -> Proposal:
         """The stall guard: the best setting predicted higher than the current one."""
         current = self.current(c)
         now = self.predict(inp, c, current)
-        higher = [s for s in self.candidates(c) if self.nominal(c, s) > self.nominal(c, current) + 1e-9
-                  or ((m := self.predict(inp, c, s)) is not None and now is not None and m > now + 1.0)]
+        # Harder by label unless the fit says confidently lower (a level's own fit counts once seen:
+        # "labels until seen"), or worth it by prediction.
+        higher = [s for s in self.candidates(c)
+                  if (self.nominal(c, s) > self.nominal(c, current) + 1e-9
+                      and not self._lower(inp, c, current, s)) or self._apart(inp, c, current, s) > 0]
         scored = self._scored(inp, c, higher)
         if not scored:
             return self._out_of_reach(inp, c, now, inp.t - self.last_change)
@@ -283,6 +355,7 @@ class AdaptivePolicy(PredictivePolicy):
         c = inp.controls
         if c is None:
             return None
+        self._see(c)
         if inp.phase == COOL_DOWN:
             self.gap = None
             return super().plan(inp)
@@ -292,6 +365,7 @@ class AdaptivePolicy(PredictivePolicy):
         return None
 
     def _decide(self, inp: RuleInput, c: Controls) -> Proposal:
+        self._see(c)
         zone = inp.zone
         est = self.fit_now(inp.t)
         if est is None:
@@ -330,6 +404,9 @@ class AdaptivePolicy(PredictivePolicy):
         # Never re-plan against the heart rate seen: below the zone nothing predicted easier.
         best_pred = self.predict(inp, c, best)
         if inp.hr < zone.low and best_pred is not None and pred is not None and best_pred < pred:
+            best = current
+        # Another activity only for a difference worth its transient (as the guards).
+        if best.level != current.level and self._apart(inp, c, current, best) == 0:
             best = current
         if best != current or self._gap_pair(inp, c) is not None:
             return self._choose(inp, c, "re-plan")

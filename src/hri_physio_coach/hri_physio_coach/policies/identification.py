@@ -84,7 +84,8 @@ class ResponseEstimator(ResponseHistory):
     def __init__(self, rest: float, tau_fast: float = 6.0, dead_time: float = 5.0, fast_share: float = 0.3,
                  fast_share_sd: float = 0.25, tau_prior: float = 60.0, log_tau_prior_sd: float = 0.5,
                  tau_bounds: tuple[float, float] = (10.0, 300.0), drift_prior_sd: float = 0.4,
-                 noise: float = 1.5, recency: float = 360.0, per_met_sd: float = 3.0) -> None:
+                 noise: float = 1.5, recency: float = 360.0, per_met_sd: float = 3.0,
+                 same_cost_sd: float = 1.2) -> None:
         if tau_fast <= 0 or dead_time < 0 or recency <= 0 or noise <= 0:
             raise ValueError("tau_fast, recency and noise must be > 0, dead_time >= 0")
         if not 0 < tau_bounds[0] < tau_prior < tau_bounds[1]:
@@ -103,7 +104,22 @@ class ResponseEstimator(ResponseHistory):
         self.noise = noise
         self.recency = recency
         self.per_met_sd = per_met_sd
+        self.same_cost_sd = same_cost_sd
+        self.costs: dict[Hashable, float] = {}  # stated cost (METs) of each level named otherwise
         self._last_tau = tau_prior
+
+    def set(self, t: float, level: Hashable, drive: float, cost: float | None = None) -> None:
+        """From ``t`` on ``level`` (an activity, or its cost) runs at ``drive``; ``cost``: its stated METs."""
+        if cost is not None:
+            self.costs[level] = float(cost)
+        super().set(t, level, drive)
+
+    def cost_of(self, level: Hashable) -> float | None:
+        """The stated cost (METs, > 1) of a level: given with it, or the level itself when it is a number."""
+        cost = self.costs.get(level)
+        if cost is None and isinstance(level, int | float) and not isinstance(level, bool):
+            cost = float(level)
+        return cost if cost is not None and cost > 1.0 else None
 
     # --- the model's columns --------------------------------------------------------------------
     def _inputs(self, start: float, n: int, levels: list[Hashable]) -> np.ndarray:
@@ -135,7 +151,9 @@ class ResponseEstimator(ResponseHistory):
 
     def _prior(self, levels: list[Hashable]) -> tuple[np.ndarray, np.ndarray]:
         """Ridge rows (and targets) of the prior: fast share near ``fast_share``, drift near 0, and levels
-        with a stated cost near the same gain per net MET (``per_met_sd`` bpm per net MET apart)."""
+        with a stated cost near the same gain per net MET (``per_met_sd`` bpm per net MET apart; two
+        activities with the same stated cost ``same_cost_sd`` apart: a label is a population mean, each
+        person's cost of an activity spreads around it)."""
         k = len(levels)
         rows = [np.zeros(2 * k + 1) for _ in range(k + 1)]
         s, sd = self.fast_share, self.fast_share_sd
@@ -143,12 +161,12 @@ class ResponseEstimator(ResponseHistory):
             # (1 - s) fast_i - s slow_i = 0 <=> fast_i / (fast_i + slow_i) = s; SD in bpm per drive ~ sd*gain.
             rows[i][2 * i], rows[i][2 * i + 1] = (1.0 - s) / (sd * 30.0), -s / (sd * 30.0)
         rows[k][-1] = 1.0 / self.drift_prior_sd
-        costed = sorted((float(lv), i) for i, lv in enumerate(levels)
-                        if isinstance(lv, int | float) and not isinstance(lv, bool) and lv > 1.0)
+        costed = sorted((cost, i) for i, lv in enumerate(levels) if (cost := self.cost_of(lv)) is not None)
         for (m_a, a), (m_b, b) in itertools.pairwise(costed):
+            sd = self.same_cost_sd if m_a == m_b else self.per_met_sd
             row = np.zeros(2 * k + 1)
-            row[2 * a:2 * a + 2] = 1.0 / ((m_a - 1.0) * self.per_met_sd)
-            row[2 * b:2 * b + 2] = -1.0 / ((m_b - 1.0) * self.per_met_sd)
+            row[2 * a:2 * a + 2] = 1.0 / ((m_a - 1.0) * sd)
+            row[2 * b:2 * b + 2] = -1.0 / ((m_b - 1.0) * sd)
             rows.append(row)
         return np.array(rows), np.zeros(len(rows))
 

@@ -48,6 +48,8 @@ class Controls:
     window_start: float  # the rule update's HR mean covers (window_start, t]
     # Per phase kind, the (duration, cost) of the routine's own activities that state a cost.
     routine_costs: tuple[tuple[str, tuple[tuple[float, float], ...]], ...] = ()
+    # (name, cost) of the activities that may run at each of ``levels`` in this phase (the coach's choice).
+    runs_at: tuple[tuple[str, float], ...] = ()
 
 
 @dataclass(frozen=True)
