@@ -71,6 +71,7 @@ class AdaptivePolicy(PredictivePolicy):
         self.trusted = 120.0  # s of a level performed after which its own fit is trusted over its label
         self.now = 0.0  # time of the rule update being decided
         self.runs_at: dict[Hashable, tuple[Hashable, ...]] = {}  # cost -> activities that may run at it
+        self._runs_at_seen: tuple[tuple[str, float], ...] = ()
 
     # --- the identified response ------------------------------------------------------------------
     def observe(self, t: float, c: Controls) -> None:
@@ -84,7 +85,8 @@ class AdaptivePolicy(PredictivePolicy):
 
     def _see(self, c: Controls) -> None:
         """Which activities may run at each cost in this phase (the coach's choice of activity)."""
-        if c.runs_at:
+        if c.runs_at and c.runs_at != self._runs_at_seen:
+            self._runs_at_seen = c.runs_at
             by_level: dict[Hashable, list[Hashable]] = {}
             for name, cost in c.runs_at:
                 by_level.setdefault(cost, []).append(name)
@@ -299,7 +301,8 @@ class AdaptivePolicy(PredictivePolicy):
         now = self.predict(inp, c, current)
         if self.gap is not None and current == self.gap[0]:
             return self._gap_step(inp, c)
-        # Easier by label, whatever the model predicts (it just missed), or confidently predicted easier.
+        # Easier by label, whatever the model predicts (it just missed), or predicted lower by a difference
+        # worth a switch.
         lower = [s for s in self.candidates(c) if self.nominal(c, s) < self.nominal(c, current) - 1e-9
                  or self._apart(inp, c, current, s) < 0]
         scored = self._scored(inp, c, lower)
