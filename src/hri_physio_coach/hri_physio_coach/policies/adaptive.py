@@ -16,7 +16,8 @@ easiest setting) and changes how it learns and decides:
 * **Choosing.** A setting is scored by the distance of its predicted mean from the target and by how
   far its band pokes out of the zone (out of the top counts ``over_weight`` times more).
 * **Overshoot guard.** When the window's heart rate is above the zone, or the fitted trajectory of the
-  current setting crosses the zone's top within ``horizon`` s, the policy acts at this rule update,
+  current setting crosses the zone's top within ``horizon`` s (the top of its band: every gain ``z``
+  SDs up, so an activity barely seen counts as uncertain), the policy acts at this rule update,
   whatever the hold: it moves to an easier setting (the one scored best among those easier by label
   or predicted lower than the current one by a difference worth a switch: ``switch_gain`` more chance
   of settling in the zone, or ``z`` SDs). It never holds while heart rate is above the zone.
@@ -375,7 +376,11 @@ class AdaptivePolicy(PredictivePolicy):
             return Proposal(0, "no heart-rate response to go on yet")
         ahead = self.model.trajectory(est, inp.t, self.horizon)
         ahead_text = f"{ahead:.0f} bpm in {self.horizon:g} s" if ahead is not None else "no trajectory"
-        above = inp.hr > zone.high or (ahead is not None and ahead > zone.high)
+        # The guard looks at the top of the band: a response barely seen (a new activity) is uncertain.
+        ahead_top = self.model.trajectory(est, inp.t, self.horizon, sds=self.z)
+        above = inp.hr > zone.high or (ahead_top is not None and ahead_top > zone.high)
+        if ahead_top is not None and ahead is not None and ahead_top > zone.high >= ahead:
+            ahead_text += f" (band top {ahead_top:.0f})"
         measuring = inp.phase == WARM_UP and inp.t < inp.phase_end - self.lead - 1e-6
         if measuring:
             if above:

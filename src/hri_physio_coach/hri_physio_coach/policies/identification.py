@@ -229,9 +229,10 @@ class ResponseEstimator(ResponseHistory):
         return Estimate(tuple(levels), theta, cov, math.exp(log_tau), log_tau_sd, sigma, len(y),
                         gains_lo, gains_hi, offset)
 
-    def trajectory(self, est: Estimate, now: float, ahead: float) -> float | None:
+    def trajectory(self, est: Estimate, now: float, ahead: float, sds: float = 0.0) -> float | None:
         """Predicted heart rate ``ahead`` s after ``now`` if the current setting is kept (None: no data),
-        the fit's ``offset`` included."""
+        the fit's ``offset`` included; with ``sds``, every activity's gain moved that many of its SDs
+        (e.g. 1: the top of the band, what a guard against overshooting looks at)."""
         if not self.settings:
             return None
         start = self.settings[0][0]
@@ -248,4 +249,11 @@ class ResponseEstimator(ResponseHistory):
         x[0:-1:2] = fast[:, -1]
         x[1:-1:2] = slow[:, -1]
         x[-1] = ramp[-1]
-        return self.rest + float(x @ est.theta) + est.offset
+        theta = est.theta
+        if sds:
+            theta = theta.copy()
+            for i, level in enumerate(levels):
+                g, sd = est.gain(level), est.gain_sd(level)
+                if g is not None and sd is not None and g > 0:
+                    theta[2 * i:2 * i + 2] *= max(0.0, 1.0 + sds * sd / g)
+        return self.rest + float(x @ theta) + est.offset

@@ -329,3 +329,30 @@ def test_a_cheaper_label_that_lands_in_the_zone_is_taken() -> None:
     s.conditioning()
     assert level_changes(s) == [(None, 6.3), (6.3, 5.8)]
     assert all(ZONE.low <= x <= ZONE.high for x in s.trace[-12:])
+
+
+def test_the_overshoot_guard_looks_at_the_top_of_the_band_of_a_barely_seen_activity() -> None:
+    """30 s into the warm-up's first stepping, its gain is still uncertain: the guard acts when the top of
+    the predicted band crosses the zone's top within 30 s, before heart rate gets there."""
+    schedule = [(180.0, 3.5, 1.0), (360.0, 5.8, 1.0)]
+    hr = synthetic([(0.0, 3.5, 1.0), (180.0, 5.8, 1.0)], {3.5: 45.0, 5.8: 95.0}, 60.0, end=240.0)
+    policy = AdaptivePolicy()
+    policy.model.rest = 70.0
+    for t0, level, drive in schedule:
+        policy.model.set(t0, level, drive)
+    for t1 in range(210, 391, 30):
+        policy.model.add_window(t1 - 30, t1, 70.0 + float(hr[t1 - 210:t1 - 180].mean()))
+    est = policy.model.fit(390.0)
+    assert est is not None
+    mean = policy.model.trajectory(est, 390.0, 30.0)
+    top = policy.model.trajectory(est, 390.0, 30.0, sds=1.0)
+    assert mean is not None and top is not None and top > mean + 3.0
+    high = (mean + top) / 2.0  # the mean stays under the zone's top, the band's top crosses it
+    zone = HeartRateZone(hr_rest=70.0, hr_max=70.0 + (high - 70.0) / 0.7, low_fraction=0.4, high_fraction=0.7)
+    c = Controls(activity="step", mets=5.8, chosen=None, levels=LEVELS, speeds=SPEEDS, tempos=TEMPOS,
+                 index=1, window_start=360.0, routine_costs=MIX)
+    inp = RuleInput(390.0, 70.0 + float(hr[180:210].mean()), zone, WARM_UP, *WARM, c)
+    assert inp.hr < zone.high
+    proposal = policy._decide(inp, c)
+    assert proposal.reason.startswith("overshoot guard (warm-up)")
+    assert proposal.level == 3.5  # an easier activity
