@@ -335,9 +335,9 @@ class AdaptivePolicy(PredictivePolicy):
             return 0
         return 1 if m > now else -1
 
-    def _lower(self, inp: RuleInput, c: Controls, current: Setting, s: Setting) -> bool:
-        """``s`` is predicted to settle more than 1 bpm below ``current``."""
-        m, now = self.predict(inp, c, s), self.predict(inp, c, current)
+    def _lower(self, inp: RuleInput, c: Controls, s: Setting, now: float | None) -> bool:
+        """``s`` is predicted to settle more than 1 bpm below ``now`` (the current setting's prediction)."""
+        m = self.predict(inp, c, s)
         return m is not None and now is not None and m < now - 1.0
 
     def _harder(self, inp: RuleInput, c: Controls, why: str) -> Proposal:
@@ -348,7 +348,7 @@ class AdaptivePolicy(PredictivePolicy):
         # "labels until seen"), or worth it by prediction.
         higher = [s for s in self.candidates(c)
                   if (self.nominal(c, s) > self.nominal(c, current) + 1e-9
-                      and not self._lower(inp, c, current, s)) or self._apart(inp, c, current, s) > 0]
+                      and not self._lower(inp, c, s, now)) or self._apart(inp, c, current, s) > 0]
         scored = self._scored(inp, c, higher)
         if not scored:
             return self._out_of_reach(inp, c, now, inp.t - self.last_change)
@@ -374,10 +374,9 @@ class AdaptivePolicy(PredictivePolicy):
         est = self.fit_now(inp.t)
         if est is None:
             return Proposal(0, "no heart-rate response to go on yet")
-        ahead = self.model.trajectory(est, inp.t, self.horizon)
-        ahead_text = f"{ahead:.0f} bpm in {self.horizon:g} s" if ahead is not None else "no trajectory"
         # The guard looks at the top of the band: a response barely seen (a new activity) is uncertain.
-        ahead_top = self.model.trajectory(est, inp.t, self.horizon, sds=self.z)
+        ahead, ahead_top = self.model.trajectory_band(est, inp.t, self.horizon, self.z)
+        ahead_text = f"{ahead:.0f} bpm in {self.horizon:g} s" if ahead is not None else "no trajectory"
         above = inp.hr > zone.high or (ahead_top is not None and ahead_top > zone.high)
         if ahead_top is not None and ahead is not None and ahead_top > zone.high >= ahead:
             ahead_text += f" (band top {ahead_top:.0f})"

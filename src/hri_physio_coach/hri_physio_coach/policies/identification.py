@@ -229,10 +229,8 @@ class ResponseEstimator(ResponseHistory):
         return Estimate(tuple(levels), theta, cov, math.exp(log_tau), log_tau_sd, sigma, len(y),
                         gains_lo, gains_hi, offset)
 
-    def trajectory(self, est: Estimate, now: float, ahead: float, sds: float = 0.0) -> float | None:
-        """Predicted heart rate ``ahead`` s after ``now`` if the current setting is kept (None: no data),
-        the fit's ``offset`` included; with ``sds``, every activity's gain moved that many of its SDs
-        (e.g. 1: the top of the band, what a guard against overshooting looks at)."""
+    def _state(self, est: Estimate, now: float, ahead: float) -> np.ndarray | None:
+        """The model's columns ``ahead`` s after ``now`` if the current setting is kept (None: no data)."""
         if not self.settings:
             return None
         start = self.settings[0][0]
@@ -249,11 +247,32 @@ class ResponseEstimator(ResponseHistory):
         x[0:-1:2] = fast[:, -1]
         x[1:-1:2] = slow[:, -1]
         x[-1] = ramp[-1]
-        theta = est.theta
-        if sds:
-            theta = theta.copy()
-            for i, level in enumerate(levels):
-                g, sd = est.gain(level), est.gain_sd(level)
-                if g is not None and sd is not None and g > 0:
-                    theta[2 * i:2 * i + 2] *= max(0.0, 1.0 + sds * sd / g)
+        return x
+
+    def _shifted(self, est: Estimate, sds: float) -> np.ndarray:
+        """The gains with every activity's moved ``sds`` of its SDs."""
+        theta = est.theta.copy()
+        for i, level in enumerate(est.levels):
+            g, sd = est.gain(level), est.gain_sd(level)
+            if g is not None and sd is not None and g > 0:
+                theta[2 * i:2 * i + 2] *= max(0.0, 1.0 + sds * sd / g)
+        return theta
+
+    def trajectory(self, est: Estimate, now: float, ahead: float, sds: float = 0.0) -> float | None:
+        """Predicted heart rate ``ahead`` s after ``now`` if the current setting is kept (None: no data),
+        the fit's ``offset`` included; with ``sds``, every activity's gain moved that many of its SDs
+        (e.g. 1: the top of the band, what a guard against overshooting looks at)."""
+        x = self._state(est, now, ahead)
+        if x is None:
+            return None
+        theta = self._shifted(est, sds) if sds else est.theta
         return self.rest + float(x @ theta) + est.offset
+
+    def trajectory_band(self, est: Estimate, now: float, ahead: float,
+                        sds: float) -> tuple[float | None, float | None]:
+        """:meth:`trajectory` and its band's edge ``sds`` SDs away, from one pass over the settings."""
+        x = self._state(est, now, ahead)
+        if x is None:
+            return None, None
+        base = self.rest + est.offset
+        return base + float(x @ est.theta), base + float(x @ self._shifted(est, sds))
