@@ -171,8 +171,8 @@ class ParticipantSimulator:
         while self._pending and self._pending[0][0] <= self.t + SAME_TIME:
             self._start(self._pending.pop(0)[1])
 
-    def _next_rr(self, hr: float, rr_mean: float) -> float:
-        x = self.kinetics.fraction_hrr
+    def _next_rr(self, hr: float, rr_mean: float, x: float) -> float:
+        """The next beat interval at heart rate ``hr`` and fraction of HRR ``x``."""
         lf_share = 0.2 if x >= 0.7 else 0.5 + 0.3 * min(x / 0.5, 1.0)
         hf_share = (1.0 - lf_share) * 0.8
         noise_share = max(0.0, 1.0 - lf_share - hf_share)
@@ -212,34 +212,76 @@ class ParticipantSimulator:
              rr_s: list[float], beats: list[float] | None = None,
              intervals: list[tuple[float, float]] | None = None,
              model_hr: list[tuple[float, float]] | None = None) -> None:
-        """Step the model to ``t_end``, appending what became due to the given lists."""
-        dt, t0, step = self.kinetics.dt, self.t0, self.kinetics.step
+        """Step the model to ``t_end``, appending what became due to the given lists.
+
+        The kinetics run in batches (up to the next activity change or ``t_end``); the beats and the
+        1-Hz reports then fall on the steps they would have fallen on stepping one by one: at each
+        step, its beats first, then its report, each with that step's heart rate.
+        """
+        dt, t0, run = self.kinetics.dt, self.t0, self.kinetics.run
         limit = t_end + 1e-9
-        while t0 + (self._steps + 1) * dt <= limit:
+        last = max(self._steps, math.floor((limit - t0) / dt))  # the last step: t0 + last * dt <= limit
+        while last > self._steps and t0 + last * dt > limit:
+            last -= 1
+        while t0 + (last + 1) * dt <= limit:
+            last += 1
+        while self._steps < last:
+            first = self._steps
             if self._pending:
                 self._start_due()
-            hr = step()
-            self._steps += 1
-            now = t0 + self._steps * dt
+            end = last
+            if self._pending:  # the batch ends where the next change is due before a step
+                end = min(end, self._change_due(self._pending[0][0], first + 1))
+            hrs, fractions = run(end - first)
             if model_hr is not None:
-                model_hr.append((now, hr))
-            while self._next_beat <= now:
-                beat = self._next_beat
-                if beats is not None:
-                    beats.append(beat)
-                if self._have_beat:
-                    self._report_rr(beat, beat - self._interval[0], rr_t, rr_s)
-                self._have_beat = True
-                rr = self._next_rr(hr, 60.0 / hr)
-                self._next_beat = beat + rr
-                self._interval = (beat, rr)
-                if intervals is not None:
-                    intervals.append(self._interval)
-            while t0 + self._hr_second <= now:
-                when = t0 + self._hr_second
-                if not self._dropped():
-                    reports.append((when, self._reported_hr(when, hr), hr))
-                self._hr_second += 1
+                model_hr.extend(zip([t0 + s * dt for s in range(first + 1, end + 1)], hrs, strict=True))
+            beat_step = self._step_reaching(self._next_beat, first + 1)
+            report_step = self._step_reaching(t0 + self._hr_second, first + 1)
+            while beat_step <= end or report_step <= end:
+                if beat_step <= report_step:  # a step's beats come before its report
+                    hr = hrs[beat_step - first - 1]
+                    beat = self._next_beat
+                    if beats is not None:
+                        beats.append(beat)
+                    if self._have_beat:
+                        self._report_rr(beat, beat - self._interval[0], rr_t, rr_s)
+                    self._have_beat = True
+                    rr = self._next_rr(hr, 60.0 / hr, fractions[beat_step - first - 1])
+                    self._next_beat = beat + rr
+                    self._interval = (beat, rr)
+                    if intervals is not None:
+                        intervals.append(self._interval)
+                    beat_step = self._step_reaching(self._next_beat, beat_step)
+                else:
+                    hr = hrs[report_step - first - 1]
+                    when = t0 + self._hr_second
+                    if not self._dropped():
+                        reports.append((when, self._reported_hr(when, hr), hr))
+                    self._hr_second += 1
+                    report_step = self._step_reaching(t0 + self._hr_second, report_step)
+            self._steps = end
+
+    def _change_due(self, at: float, lowest: int) -> int:
+        """The first step count from ``lowest`` on at which a change set for ``at`` starts (as
+        :meth:`_start_due` decides it)."""
+        t0, dt = self.t0, self.kinetics.dt
+        step = self._step_reaching(at - SAME_TIME, lowest)
+        while step > lowest and at <= t0 + (step - 1) * dt + SAME_TIME:
+            step -= 1
+        while not at <= t0 + step * dt + SAME_TIME:
+            step += 1
+        return step
+
+    def _step_reaching(self, when: float, lowest: int) -> int:
+        """The first step from ``lowest`` on that ends at or after ``when`` (``t0 + step * dt``, as the
+        model counts its time)."""
+        t0, dt = self.t0, self.kinetics.dt
+        step = max(lowest, math.ceil((when - t0) / dt))
+        while step > lowest and t0 + (step - 1) * dt >= when:
+            step -= 1
+        while t0 + step * dt < when:
+            step += 1
+        return step
 
     def _report_rr(self, when: float, rr: float, rr_t: list[float], rr_s: list[float]) -> None:
         """What the strap reports: mostly the true interval, sometimes a missed or extra beat."""

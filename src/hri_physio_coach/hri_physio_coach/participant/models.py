@@ -173,20 +173,39 @@ class VagalKinetics:
         self.seated = activity.name in SEATED
 
     def step(self) -> float:
-        p, dt = self.p, self.dt
+        return self.run(1)[0][0]
+
+    def run(self, n: int) -> tuple[list[float], list[float]]:
+        """Advance ``n`` steps of an unchanged activity: heart rate and fraction of HRR after each
+        (as :meth:`HeartRateKinetics.run`, one loop over local names)."""
+        p, dt, delay = self.p, self.dt, self._delay
         fast_target = min(self.rise, self.vagal_room)
-        tau = p.tau_vagal if fast_target >= self.fast else p.tau_vagal * p.off_factor
-        self.fast += dt * (fast_target - self.fast) / tau
-        self._delay.append(self.rise - fast_target)
-        slow_target = self._delay.popleft()
-        tau = p.tau_on if slow_target >= self.slow else p.tau_on * p.off_factor
-        self.slow += dt * (slow_target - self.slow) / tau
-        if not self.seated:
-            self.drift += dt / 60.0 * p.drift_rate * min(self.intensity / 0.4, 1.0)
-        else:
-            self.drift -= dt * self.drift / (p.tau_on * p.off_factor)
-        self.arrival -= dt * self.arrival / (p.tau_on * p.off_factor)
-        return self.hr
+        slow_in = self.rise - fast_target
+        tau_fast_on, tau_fast_off = p.tau_vagal, p.tau_vagal * p.off_factor
+        tau_on, tau_off = p.tau_on, p.tau_on * p.off_factor
+        drift_step = dt / 60.0 * p.drift_rate * min(self.intensity / 0.4, 1.0) if not self.seated else None
+        hr_rest, hr_max = p.hr_rest, p.hr_max_true
+        hrr = hr_max - hr_rest
+        fast, slow, drift, arrival = self.fast, self.slow, self.drift, self.arrival
+        hrs: list[float] = []
+        fractions: list[float] = []
+        for _ in range(n):
+            fast += dt * (fast_target - fast) / (tau_fast_on if fast_target >= fast else tau_fast_off)
+            delay.append(slow_in)
+            slow_target = delay.popleft()
+            slow += dt * (slow_target - slow) / (tau_on if slow_target >= slow else tau_off)
+            if drift_step is not None:
+                drift += drift_step
+            else:
+                drift -= dt * drift / tau_off
+            arrival -= dt * arrival / tau_off
+            hr = hr_rest + fast + slow + drift + arrival
+            if hr_max < hr:  # min(hr, hr_max)
+                hr = hr_max
+            hrs.append(hr)
+            fractions.append((hr - hr_rest) / hrr)
+        self.fast, self.slow, self.drift, self.arrival = fast, slow, drift, arrival
+        return hrs, fractions
 
 
 def sample_vagal(n: int, seed: int, age_range: tuple[float, float] = (20.0, 50.0)) -> list[VagalParams]:
@@ -328,30 +347,60 @@ class Vo2Kinetics:
         self.seated = activity.name in SEATED
 
     def step(self) -> float:
-        p, dt = self.p, self.dt
+        return self.run(1)[0][0]
+
+    def run(self, n: int) -> tuple[list[float], list[float]]:
+        """Advance ``n`` steps of an unchanged activity: heart rate and fraction of HRR after each
+        (as :meth:`HeartRateKinetics.run`, one loop over local names)."""
+        p, dt, delay, target = self.p, self.dt, self._delay, self.target
         share = p.phase1_share
-        self.phase1 += dt * (share * self.target - self.phase1) / 5.0
-        self._delay.append((1.0 - share) * self.target)
-        delayed = self._delay.popleft()
-        intensity = (REST_VO2 + self.target) / p.vo2max
-        # Phase II is slower at higher intensity (above VT) and for less fit people.
-        tau = p.tau_vo2 * (1.0 + 0.5 * max(0.0, intensity - p.vt_fraction) / (1.0 - p.vt_fraction))
-        if delayed < self.phase2:
-            tau *= 1.2  # recovery slightly slower
-        self.phase2 += dt * (delayed - self.phase2) / tau
-        vt = p.vt_fraction * p.vo2max
-        excess = REST_VO2 + self.phase1 + self.phase2 - vt
-        self.above_vt_for = self.above_vt_for + dt if excess > 0 else 0.0
-        slow_target = p.slow_gain * excess if excess > 0 and self.above_vt_for > self.SLOW_DELAY else 0.0
-        self.slow += dt * (slow_target - self.slow) / self.TAU_SLOW
-        room = p.vo2max - REST_VO2 - self.phase1 - self.phase2
-        self.slow = min(self.slow, max(room, 0.0))
-        self.heart += dt * (p.hr_of_vo2(self.vo2) - self.heart) / p.tau_heart
-        self.arm += dt * (self.arm_target - self.arm) / p.tau_heart
-        self.drift += dt / 60.0 * p.drift_gain * max(0.0, self.vo2 / p.vo2max - 0.3)
-        if self.seated:
-            self.drift -= dt * self.drift / 300.0
-        return self.hr
+        phase1_in, phase2_in = share * target, (1.0 - share) * target
+        intensity = (REST_VO2 + target) / p.vo2max
+        # Phase II is slower at higher intensity (above VT) and for less fit people; recovery slightly slower.
+        tau_up = p.tau_vo2 * (1.0 + 0.5 * max(0.0, intensity - p.vt_fraction) / (1.0 - p.vt_fraction))
+        tau_down = tau_up * 1.2
+        vt, vo2max, slow_gain = p.vt_fraction * p.vo2max, p.vo2max, p.slow_gain
+        reserve = vo2max - REST_VO2
+        hr_rest, hr_max, tau_heart, arm_target = p.hr_rest, p.hr_max_true, p.tau_heart, self.arm_target
+        swain = 0.64 * p.hr_max_true  # p.hr_of_vo2, spelled out
+        drift_step = dt / 60.0 * p.drift_gain
+        seated, offset = self.seated, p.calibration_offset
+        hrr = hr_max - hr_rest
+        slow_delay, tau_slow = self.SLOW_DELAY, self.TAU_SLOW
+        phase1, phase2, slow, above_vt_for = self.phase1, self.phase2, self.slow, self.above_vt_for
+        heart, arm, drift = self.heart, self.arm, self.drift
+        hrs: list[float] = []
+        fractions: list[float] = []
+        for _ in range(n):
+            phase1 += dt * (phase1_in - phase1) / 5.0
+            delay.append(phase2_in)
+            delayed = delay.popleft()
+            phase2 += dt * (delayed - phase2) / (tau_down if delayed < phase2 else tau_up)
+            excess = REST_VO2 + phase1 + phase2 - vt
+            above_vt_for = above_vt_for + dt if excess > 0 else 0.0
+            slow_target = slow_gain * excess if excess > 0 and above_vt_for > slow_delay else 0.0
+            slow += dt * (slow_target - slow) / tau_slow
+            room = reserve - phase1 - phase2
+            cap = 0.0 if room < 0.0 else room  # max(room, 0.0)
+            if cap < slow:  # min(slow, cap)
+                slow = cap
+            vo2 = REST_VO2 + phase1 + phase2 + slow
+            heart += dt * (hr_rest + swain * (vo2 - REST_VO2) / vo2max - heart) / tau_heart
+            arm += dt * (arm_target - arm) / tau_heart
+            work = vo2 / vo2max - 0.3
+            drift += drift_step * (work if work > 0.0 else 0.0)  # max(0.0, work)
+            if seated:
+                drift -= dt * drift / 300.0
+            hr = heart + drift + arm
+            if seated:
+                hr += offset
+            if hr_max < hr:  # min(hr, hr_max)
+                hr = hr_max
+            hrs.append(hr)
+            fractions.append((hr - hr_rest) / hrr)
+        self.phase1, self.phase2, self.slow, self.above_vt_for = phase1, phase2, slow, above_vt_for
+        self.heart, self.arm, self.drift = heart, arm, drift
+        return hrs, fractions
 
 
 def sample_vo2drive(n: int, seed: int, age_range: tuple[float, float] = (20.0, 50.0)) -> list[Vo2Params]:

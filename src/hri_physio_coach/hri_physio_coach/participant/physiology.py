@@ -202,19 +202,36 @@ class HeartRateKinetics:
 
     def step(self) -> float:
         """Advance by dt; returns the heart rate (bpm) at the end of the step."""
+        return self.run(1)[0][0]
+
+    def run(self, n: int) -> tuple[list[float], list[float]]:
+        """Advance ``n`` steps of an unchanged activity: the heart rate (bpm) and the fraction of HRR
+        at the end of each. One loop over local names, the same arithmetic as n single steps: the model
+        steps ten times a model second, and that loop is most of an evaluated session's time."""
         p, dt, u, delay = self.p, self.dt, self.u, self._delay
-        delay.append(u)
-        u_delayed = delay.popleft()
-        self.x_fast += dt * (0.35 * u - self.x_fast) / p.tau_fast
-        target = 0.65 * u_delayed
-        tau = p.tau_on if target > self.x_slow else p.tau_off
-        self.x_slow += dt * (target - self.x_slow) / tau
+        fast_in, tau_fast, tau_on, tau_off, tau_drift = 0.35 * u, p.tau_fast, p.tau_on, p.tau_off, p.tau_drift
         drive = p.drift_amplitude * max(0.0, (u - 0.3) / 0.4)
-        self.x_drift += dt * (drive - self.x_drift) / p.tau_drift
-        hr = p.hr_rest + (self.x_fast + self.x_slow + self.x_drift) * (p.hr_max_true - p.hr_rest)
-        if self.seated:
-            hr += p.calibration_offset
-        return min(hr, p.hr_max_true)  # = self.hr, spelled out: this runs ten times a model second
+        hr_rest, hr_max = p.hr_rest, p.hr_max_true
+        hrr = hr_max - hr_rest
+        offset = p.calibration_offset if self.seated else 0.0
+        x_fast, x_slow, x_drift = self.x_fast, self.x_slow, self.x_drift
+        hrs: list[float] = []
+        fractions: list[float] = []
+        for _ in range(n):
+            delay.append(u)
+            u_delayed = delay.popleft()
+            x_fast += dt * (fast_in - x_fast) / tau_fast
+            target = 0.65 * u_delayed
+            x_slow += dt * (target - x_slow) / (tau_on if target > x_slow else tau_off)
+            x_drift += dt * (drive - x_drift) / tau_drift
+            fraction = x_fast + x_slow + x_drift
+            hr = hr_rest + fraction * hrr
+            if offset:
+                hr += offset
+            hrs.append(hr_max if hr_max < hr else hr)  # min(hr, hr_max)
+            fractions.append(fraction)
+        self.x_fast, self.x_slow, self.x_drift = x_fast, x_slow, x_drift
+        return hrs, fractions
 
 
 def breathing_rate(fraction_hrr: float) -> float:
