@@ -137,16 +137,21 @@ class ResponseEstimator(ResponseHistory):
             u = np.concatenate([np.zeros((u.shape[0], delay)), u[:, :u.shape[1] - delay]], axis=1)
         return first_order_lag(u, tau, axis=1)
 
-    def _design(self, slow: np.ndarray, fast: np.ndarray, ramp: np.ndarray, lo: np.ndarray,
-                hi: np.ndarray) -> np.ndarray:
-        """Window means of every column: fast/slow per level interleaved, then drift."""
-        cols = np.empty((2 * len(slow) + 1, len(lo)))
-        for i in range(len(slow)):
-            for j, x in enumerate((fast[i], slow[i])):
-                c = np.concatenate([[0.0], np.cumsum(x)])
-                cols[2 * i + j] = (c[hi] - c[lo]) / (hi - lo)
-        c = np.concatenate([[0.0], np.cumsum(ramp)])
-        cols[-1] = (c[hi] - c[lo]) / (hi - lo)
+    @staticmethod
+    def _window_means(x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """Mean of each row of ``x`` over each window ``[lo, hi)`` (rows x windows)."""
+        c = np.zeros((x.shape[0], x.shape[1] + 1))
+        c[:, 1:] = np.cumsum(x, axis=1)
+        return (c[:, hi] - c[:, lo]) / (hi - lo)
+
+    @staticmethod
+    def _design(slow: np.ndarray, fast: np.ndarray, ramp: np.ndarray) -> np.ndarray:
+        """The design matrix from the columns' window means (:meth:`_window_means`): fast/slow per level
+        interleaved, then drift; windows are rows."""
+        cols = np.empty((2 * len(slow) + 1, ramp.shape[-1]))
+        cols[0:-1:2] = fast
+        cols[1:-1:2] = slow
+        cols[-1] = ramp
         return cols.T
 
     def _prior(self, levels: list[Hashable]) -> tuple[np.ndarray, np.ndarray]:
@@ -193,8 +198,12 @@ class ResponseEstimator(ResponseHistory):
         ramp = np.cumsum(exercising) / 60.0  # minutes of exercise so far
         prior_rows, prior_y = self._prior(levels)
 
+        fast_means = self._window_means(fast, lo, hi)  # the same for every slow time constant
+        ramp_means = self._window_means(ramp[None, :], lo, hi)[0]
+
         def solve(log_tau: float) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
-            a = self._design(self._slow(u, math.exp(log_tau)), fast, ramp, lo, hi)
+            slow_means = self._window_means(self._slow(u, math.exp(log_tau)), lo, hi)
+            a = self._design(slow_means, fast_means, ramp_means)
             aw = np.vstack([a * w[:, None], prior_rows])
             yw = np.concatenate([y * w, prior_y])
             theta, *_ = np.linalg.lstsq(aw, yw, rcond=None)
