@@ -18,6 +18,7 @@ coach's ``session_start`` and then runs this same :func:`~hri_physio_coach.parti
 
 from __future__ import annotations
 
+import functools
 import heapq
 import itertools
 from collections import deque
@@ -101,6 +102,7 @@ def coach_config(spec: SessionSpec, base: CoachConfig | None = None) -> CoachCon
     return CoachConfig.from_mapping(values, f"session {spec.policy}/{spec.participant}")
 
 
+@functools.lru_cache(maxsize=256)
 def _is_audio(line: str) -> bool:
     try:
         return isinstance(parse_command(line), SetAudio)

@@ -8,7 +8,7 @@ and returns a :class:`Decision`.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass, fields
 from typing import Protocol
 
 from hri_physio_coach.zones import HeartRateZone
@@ -107,7 +107,8 @@ class Decision:
         return self.delta != 0 or self.level_before != self.level_after
 
     def as_dict(self) -> dict[str, object]:
-        return {**asdict(self), "changed": self.changed}
+        # Every field is a number, a string or None: no deep copy (dataclasses.asdict) needed.
+        return {**{f.name: getattr(self, f.name) for f in fields(self)}, "changed": self.changed}
 
 
 
