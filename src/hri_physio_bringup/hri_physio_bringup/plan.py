@@ -162,9 +162,10 @@ def strap_device_id(options: SessionConfig, simulated_id: str) -> str:
     return simulated_id
 
 
-def media_nodes(options: SessionConfig) -> list[NodeLaunch]:
-    """The audio and video streamers, on the session's clock, never touching a screen."""
-    audio: dict[str, Any] = {"sink": options.audio_sink}
+def media_nodes(options: SessionConfig, coach: CoachNodeConfig) -> list[NodeLaunch]:
+    """The audio and video streamers, on the session's clock, never touching a screen; the audio
+    streamer prepares the coach's music before the session (a new tempo then plays at once)."""
+    audio: dict[str, Any] = {"sink": options.audio_sink, "preload": coach.music_requests()}
     if options.audio_sink == "null":
         audio["block"] = NULL_SINK_BLOCK
     return [
@@ -220,7 +221,7 @@ def plan_session(options: SessionConfig, folder: SessionFolder, device_id: str,
         "joint_state_rate": round(1 / CLOCK_STEP, 3), "mirror_media": False}), ("--ros-args", *SIM_TIME)))
     nodes.append(NodeLaunch(CONTROLLER, "qt_controller", CONTROLLER,
                             _validated(QtControllerConfig, CONTROLLER, {}), ("--ros-args", *SIM_TIME)))
-    nodes.extend(media_nodes(options))
+    nodes.extend(media_nodes(options, coach))
     nodes.append(heart_rate_node(options, device_id))
     # Each receiver holds its input until all of its listeners are there, so the bag and the
     # coach (or processor) get every sample from the first - also after a restart: HR goes to the

@@ -219,6 +219,12 @@ class CoachConfig(NodeConfig):
     def participant(self) -> str:
         return participant_id(self.part_name, self.part_age, self.participant_salt)
 
+    def music_requests(self) -> list[str]:
+        """The audio requests of the ladder's music (one per step) and of the relaxing music: what an
+        audio streamer can prepare before the session, so no change of tempo waits for its track."""
+        names = [self.audio_exercise_base.format(suffix) for suffix in self.audio_suffix]
+        return list(dict.fromkeys(self.audio_path.format(name) for name in [*names, self.audio_relaxing]))
+
 
 class CoachNodeConfig(CoachConfig):
     """``qt_physio_coach``'s options: the session's, plus its topics and timing."""

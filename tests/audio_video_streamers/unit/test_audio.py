@@ -8,6 +8,7 @@ from __future__ import annotations
 import logging
 import threading
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -241,6 +242,31 @@ def test_bad_requests_report_errors_and_the_track_goes_on(tmp_path: Path) -> Non
     sf.write(str(tmp_path / "through.wav"), y, RATE)
     measured, residual = measure_tempo(tmp_path / "through.wav")
     assert abs(measured - 120.0) <= 0.5 and residual < 0.002  # uninterrupted beat
+
+
+def test_preloaded_tracks_are_prepared_once_and_a_request_for_one_starts_at_the_next_block(
+        tmp_path: Path) -> None:
+    rig = Rig(tmp_path, fade=0.0)
+    library = rig.player.library
+    built: list[str] = []  # tracks built (a missing file fails in the build: not one)
+    build = library._build
+
+    def counted(request: Any) -> Any:
+        track = build(request)
+        built.append(request.text)
+        return track
+
+    library._build = counted  # type: ignore[method-assign]
+    assert rig.player.preload(["beat:120", "relaxing", "missing.wav", "beat:0"]) == 2
+    assert built == ["beat:120", "relaxing"]
+    warnings = rig.logs.messages(logging.WARNING)
+    assert len(warnings) == 2 and "missing.wav" in warnings[0] and "beat:0" in warnings[1]
+    assert rig.player.status().requests.failed == 0  # nobody asked for them yet: no request failed
+    rig.player.request("beat:120")
+    rig.player.prepare_pending()
+    assert built == ["beat:120", "relaxing"]  # from the library, not built again
+    rig.play(0.05)
+    assert (rig.player.status().source, rig.player.status().state) == ("beat:120", State.PLAYING)
 
 
 def test_a_burst_plays_the_newest_playable_request_and_accounts_for_all(tmp_path: Path) -> None:

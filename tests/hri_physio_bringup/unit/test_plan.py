@@ -154,7 +154,11 @@ def test_the_packaged_coach_asks_for_the_streamers_built_in_sources(tmp_path: Pa
                     'audio_exercise_base: "exercise_{}"\n')
     files = coach_config(SessionConfig(conf=str(conf)))
     assert files.audio_path.format(files.audio_exercise_base.format("125")) == "./audio/exercise_125.wav"
-    plan(tmp_path, conf=str(conf))  # every node, the coach with its routine, validated
+    with_files, _ = plan(tmp_path, conf=str(conf))  # every node, the coach with its routine, validated
+    # The audio streamer prepares the coach's music before the session: a new tempo never waits for its track.
+    assert plan(tmp_path)[0].node(AUDIO).config.preload == [*music, "relaxing"]
+    assert with_files.node(AUDIO).config.preload == [
+        *(f"./audio/exercise_{s}.wav" for s in files.audio_suffix), "./audio/relaxing.wav"]
 
 
 def test_a_polar_strap_replaces_the_simulated_participant(tmp_path: Path) -> None:

@@ -30,5 +30,9 @@ class AudioStreamerConfig(NodeConfig):
                             "runs (empty = memory only)")
     memory_cache_mb: int = option(512, "decoded tracks kept in memory", unit="MB", ge=0)
     initial: str = option("", "request to play at start (e.g. relaxing; empty = silence until a request)")
+    preload: list[str] = option([], "requests to prepare at start-up (synthesised, decoded, stretched), so "
+                                "the first time each is asked for it plays at once instead of after its "
+                                "preparation (seconds for a file to stretch); one that cannot be prepared "
+                                "is logged and tried again when asked for")
     status_rate: float = option(1.0, "periodic status messages (also on every change)", unit="Hz",
                                 gt=0.0, le=50.0)

@@ -95,6 +95,20 @@ class AudioPlayer:
         if ready is not None:
             self._commands.put(ready)
 
+    def preload(self, texts: list[str]) -> int:
+        """Prepare the tracks of ``texts`` now, on this thread (the library keeps them), so a request for
+        one later starts at the next block; returns how many are ready. One that cannot be prepared is
+        logged (a warning: it is tried again, and reported, when asked for)."""
+        ready = 0
+        for text in texts:
+            try:
+                self._resolve(text)
+            except RequestError as exc:
+                self.log.warning(f"audio preload {text!r}: {exc}; it is tried again when asked for")
+            else:
+                ready += 1
+        return ready
+
     def _resolve(self, text: str) -> _Command:
         request = parse_audio_request(text, self.media_dir)
         if request.kind == "stop":

@@ -12,6 +12,7 @@ Requests: ``beat:<bpm>``, ``relaxing``, ``file:<path>@<bpm>`` (stretched), ``<pa
 from __future__ import annotations
 
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -44,6 +45,11 @@ class AudioStreamerNode(MediaStreamerNode):
         self.attach(AudioPlayer(library, sink, fade=cfg.fade, block=cfg.block, clock=self.now,
                                 on_status=self.publish_status, media_dir=media_dir, log=log),
                     topics.AUDIO_REQUEST, topics.AUDIO_CURRENT, cfg.status_rate)
+        if cfg.preload:
+            started = time.monotonic()
+            ready = self.player.preload(cfg.preload)
+            self.get_logger().info(f"prepared {ready} of {len(cfg.preload)} preloaded tracks in "
+                                   f"{time.monotonic() - started:.1f} s")
         if cfg.initial:
             self.player.request(cfg.initial)
 
