@@ -24,7 +24,8 @@ faster than real life, where every node keeps up) while the loop lags behind it:
   confirms the message on ``/participant/heard`` (:func:`~hri_physio_coach.participant.perception.receipt`):
   a participant process starved for a moment would otherwise take the instruction up a mark late
   and run another session than the evaluation's. Confirmations that still came too late are
-  counted (``late_uptakes``).
+  counted (``late_uptakes``), and so are those stamped a mark early (``early_uptakes``: the
+  participant's clock was behind the sender's when it heard the message; nothing to hold for).
 
 A hold lasts at most ``max_hold`` wall seconds (a strap that stopped, a crashed controller): then
 the clock goes on at full speed and the release is counted. Every hold is counted by its cause,
@@ -205,7 +206,9 @@ class Uptakes:
         self._monotonic = monotonic
         self.start: float | None = None
         self.late = 0  # receipts whose time puts the uptake on a later mark than the instruction's
-        self.late_examples: list[dict[str, object]] = []  # the first few, for summary.json
+        #: Receipts whose time puts it on an earlier mark: the participant's clock was behind the sender's.
+        self.early = 0
+        self.late_examples: list[dict[str, object]] = []  # the first few of both, for summary.json
         self._unconfirmed: list[_Instruction] = []
         self._early: deque[tuple[float, str, int, float]] = deque()  # (wall, topic, key, heard at)
 
@@ -249,13 +252,21 @@ class Uptakes:
         self._unconfirmed.clear()
 
     def _check(self, topic: str, sent: float, heard_at: float) -> None:
+        """Count a receipt that puts the uptake on another mark than the instruction's time does."""
         mark = self.mark(sent)
-        if mark is not None and heard_at >= mark - TAKE_IN_TIME - SAME_MARK:
+        if mark is None:
+            return
+        taken = self.mark(heard_at)
+        if heard_at >= mark - TAKE_IN_TIME - SAME_MARK:
             self.late += 1
-            if len(self.late_examples) < 5:
-                assert self.start is not None
-                self.late_examples.append({"topic": topic, "sent_s": round(sent - self.start, 3),
-                                           "heard_s": round(heard_at - self.start, 3)})
+        elif taken is None or taken < mark - SAME_MARK:
+            self.early += 1
+        else:
+            return
+        if len(self.late_examples) < 5:
+            assert self.start is not None
+            self.late_examples.append({"topic": topic, "sent_s": round(sent - self.start, 3),
+                                       "heard_s": round(heard_at - self.start, 3)})
 
     def _expire(self, wall: float) -> None:
         while self._early and wall - self._early[0][0] > self.expiry:
@@ -407,4 +418,5 @@ class ClockGuard:
         """For summary.json: wall seconds held, holds and releases by cause."""
         return {"held_wall_s": round(clock.held_wall, 3), "holds": dict(self.holds),
                 "released": dict(self.released), "late_uptakes": self.late_uptakes,
+                **({"early_uptakes": self._uptakes.early} if self._uptakes.early else {}),
                 **({"late_examples": self._uptakes.late_examples} if self._uptakes.late_examples else {})}

@@ -307,6 +307,12 @@ def test_a_receipt_heard_before_its_instruction_confirms_it_and_a_late_one_is_co
     assert guard.limit(121.2) == pytest.approx(123.45)
     guard.participant_heard(COMMANDS, message_key("say hi"), 121.3)
     assert guard.limit(121.3) is None and guard.late_uptakes == 1
+    # Sent at 130 s (mark 135 s) but stamped 128.2 s by a participant whose clock lagged: mark 130 s.
+    guard.instruction(COMMANDS, message_key("gesture play step_up 1.0"), 130.0)
+    guard.participant_heard(COMMANDS, message_key("gesture play step_up 1.0"), 128.2)
+    report = guard.report(SimClock(start=100.0, speed=10.0, monotonic=wall))
+    assert report["late_uptakes"] == 1 and report["early_uptakes"] == 1
+    assert [e["heard_s"] for e in report["late_examples"]] == [13.6, 28.2]  # type: ignore[union-attr]
 
 
 def test_a_participant_that_never_confirms_is_given_up_on_after_max_hold() -> None:
