@@ -98,12 +98,6 @@ class ResponseModel(ResponseHistory):
             u[which == i] = drive
         return out
 
-    def _response(self, u: np.ndarray, tau: float, fast: np.ndarray) -> np.ndarray:
-        delay = round(self.dead_time)
-        delayed = np.concatenate([np.zeros(delay), u[:len(u) - delay]]) if delay else u
-        slow = first_order_lag(delayed, tau)
-        return self.fast_share * fast + (1.0 - self.fast_share) * slow
-
     def fit(self, now: float) -> ResponseFit | None:
         """Least-squares gains for the levels performed so far (None before any window)."""
         if not self.settings or not self.windows:
@@ -121,14 +115,17 @@ class ResponseModel(ResponseHistory):
         w = np.sqrt(0.5 ** ((now - np.array([self.windows[i][1] for i in keep])) / self.recency))
         lo = np.array([bounds[i][0] for i in keep])
         hi = np.array([bounds[i][1] for i in keep])
-        fast = {lv: first_order_lag(inputs[lv], self.tau_fast) for lv in levels}
+        u = np.stack([inputs[lv] for lv in levels])  # a row per level
+        fast = first_order_lag(u, self.tau_fast, axis=1)
+        delay = round(self.dead_time)
+        delayed = np.concatenate([np.zeros((len(levels), delay)), u[:, :n - delay]], axis=1) if delay else u
+        c = np.zeros((len(levels), n + 1))
         best: ResponseFit | None = None
         for tau in self.taus:
-            cols = []
-            for lv in levels:
-                c = np.concatenate([[0.0], np.cumsum(self._response(inputs[lv], tau, fast[lv]))])
-                cols.append((c[hi] - c[lo]) / (hi - lo))
-            a_mat = np.stack(cols, axis=1)
+            slow = first_order_lag(delayed, tau, axis=1)
+            response = self.fast_share * fast + (1.0 - self.fast_share) * slow
+            c[:, 1:] = np.cumsum(response, axis=1)
+            a_mat = np.ascontiguousarray(((c[:, hi] - c[:, lo]) / (hi - lo)).T)  # a column per level
             used = a_mat.max(axis=0) > 1e-3
             if not used.any():
                 return None
@@ -137,7 +134,7 @@ class ResponseModel(ResponseHistory):
             resid = (a_mat[:, used] @ gains_used - means) * w
             rms = float(np.sqrt(np.sum(resid ** 2) / np.sum(w ** 2)))
             if best is None or rms < best.rms - 1e-9:
-                gains = {lv: float(g) for lv, g in zip([lv for lv, u in zip(levels, used, strict=True) if u],
-                                                       gains_used, strict=True)}
+                fitted = [lv for lv, on in zip(levels, used, strict=True) if on]
+                gains = {lv: float(g) for lv, g in zip(fitted, gains_used, strict=True)}
                 best = ResponseFit(gains, tau, rms, len(keep))
         return best
