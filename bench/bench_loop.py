@@ -50,6 +50,7 @@ from typing import Any
 
 import numpy as np
 import pylsl
+from baseline import source_tree
 
 HERE = Path(__file__).resolve()
 ROOT = HERE.parent.parent
@@ -228,17 +229,6 @@ class LatencyProbe:
 
 
 # -- one session ---------------------------------------------------------------------------------
-
-
-def source_tree(ref: str, into: Path) -> dict[str, str]:
-    """The sources of git commit ``ref`` under ``into``; the environment that runs them."""
-    archive = subprocess.run(["git", "-C", str(ROOT), "archive", ref, "src"], check=True,
-                             capture_output=True).stdout
-    subprocess.run(["tar", "-x", "-C", str(into)], input=archive, check=True)
-    packages = sorted(str(p.parent) for p in (into / "src").glob("*/setup.cfg"))
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([*packages, env["PYTHONPATH"]] if env.get("PYTHONPATH") else packages)
-    return env
 
 
 class LiveViewer:
