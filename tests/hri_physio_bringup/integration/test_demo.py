@@ -74,6 +74,8 @@ def test_the_session_folder_holds_everything(demo: tuple[Run, Path]) -> None:
     assert {name: n["exit_status"] for name, n in summary["nodes"].items()} == dict.fromkeys(NODES, 0)
     conf = str(folder / "configs" / "hr_receiver.yaml")
     assert summary["nodes"]["hr_receiver"]["argv"][:2] == ["--conf", conf]
+    # The music the coach will ask for was prepared before the session: six beats and the relaxing pad.
+    assert "prepared 7 of 7 preloaded tracks" in (folder / "logs" / "audio_streamer.log").read_text()
     report = json.loads((folder / "report.json").read_text())
     assert set(report["in_zone_fraction"]) == {"warm_up", "conditioning", "cool_down"}
     assert (folder / "report.html").stat().st_size > 0 and (folder / "hr_session.png").is_file()
