@@ -31,6 +31,7 @@ Numbers only (numpy/scipy), no clock: times are given by the caller.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from collections.abc import Hashable
@@ -201,15 +202,8 @@ class ResponseEstimator(ResponseHistory):
         fast_means = self._window_means(fast, lo, hi)  # the same for every slow time constant
         ramp_means = self._window_means(ramp[None, :], lo, hi)[0]
 
-        solved: dict[float, tuple[float, np.ndarray, np.ndarray, np.ndarray]] = {}
-
+        @functools.cache  # the search's best point is asked for again
         def solve(log_tau: float) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
-            """Cost, parameters and design at ``log_tau`` (the search's best point is asked for again)."""
-            if log_tau not in solved:
-                solved[log_tau] = solve_at(log_tau)
-            return solved[log_tau]
-
-        def solve_at(log_tau: float) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
             slow_means = self._window_means(self._slow(u, math.exp(log_tau)), lo, hi)
             a = self._design(slow_means, fast_means, ramp_means)
             aw = np.vstack([a * w[:, None], prior_rows])
