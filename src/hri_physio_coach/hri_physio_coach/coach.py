@@ -198,6 +198,10 @@ class ExerciseCoach(Listener):
     def start(self, now: float | None = None) -> None:
         self.engine.start(now)
 
+    def warm_up(self) -> None:
+        """Load what the policy's first decision needs (see :meth:`Policy.warm_up`)."""
+        self.adapter.policy.warm_up()
+
     def tick(self, now: float | None = None) -> None:
         now = self.clock() if now is None else float(now)
         if self.engine.running:

@@ -23,6 +23,7 @@ from __future__ import annotations
 import json
 import sys
 import threading
+import time
 from typing import Any
 
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -82,6 +83,11 @@ class QtPhysioCoachNode(ManagedNode):
         self._clocks = SourceWatch()
         self._coach_nodes: dict[bytes, str | None] = {}  # command publisher -> its node, if a coach
         self.coach = ExerciseCoach(cfg, self._now, self._send, self._on_event)
+        # Before the session, not at its first rule update: the predictive policies' scipy takes over a
+        # second to import, and a coach stalled there would stop a sim clock or decide late at 1x.
+        began = time.monotonic()
+        self.coach.warm_up()
+        warm_up_s = time.monotonic() - began
         self.control = SessionControl(self.coach, cfg.interactive)
         self.commands = self.create_publisher(String, cfg.command_topic, command_qos())
         self.events = self.create_publisher(String, cfg.events_topic, event_qos())
@@ -100,6 +106,7 @@ class QtPhysioCoachNode(ManagedNode):
             f"participant {self.coach.participant}, policy {cfg.policy}, routine "
             f"{self.coach.routine.name} ({self.coach.routine.duration / 60:.1f} min), HR from {cfg.hr_topic}"
             + (": waiting for 'start'" if cfg.interactive else "")
+            + f" (policy ready in {warm_up_s:.1f} s)"
         )
 
     # --- plumbing ----------------------------------------------------------------------------

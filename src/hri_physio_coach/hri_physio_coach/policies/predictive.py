@@ -32,7 +32,7 @@ import math
 from collections.abc import Hashable
 from dataclasses import dataclass
 
-from hri_physio_coach.policies.response_model import ResponseFit, ResponseModel
+from hri_physio_coach.policies.response_model import ResponseFit, ResponseModel, load_scipy
 from hri_physio_coach.policies.types import (
     CONDITIONING,
     COOL_DOWN,
@@ -82,6 +82,9 @@ class PredictivePolicy(BasePolicy):
         self.prepared = False
         self.noticed: str | None = None
         self.fit: ResponseFit | None = None
+
+    def warm_up(self) -> None:
+        load_scipy()
 
     # --- what is being performed ----------------------------------------------------------------
     @staticmethod

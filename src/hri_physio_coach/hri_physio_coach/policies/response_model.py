@@ -24,6 +24,13 @@ import numpy as np
 TAU_GRID = (30.0, 45.0, 60.0, 85.0, 120.0)
 
 
+def load_scipy() -> None:
+    """Import the parts of scipy the fits use (scipy.signal here, scipy.optimize in identification):
+    over a second of CPU on first use, which a coach spends before its session, not at a rule update."""
+    import scipy.optimize
+    import scipy.signal  # noqa: F401
+
+
 def first_order_lag(u: np.ndarray, tau: float, axis: int = -1) -> np.ndarray:
     """``u`` through a first-order lag of time constant ``tau`` (in samples), along ``axis``.
 

@@ -131,6 +131,11 @@ class Policy(Protocol):
         """At a phase start, what the policy wants for the phase (None: nothing changes)."""
         ...
 
+    def warm_up(self) -> None:
+        """Load now what the first decision needs (libraries a policy imports on first use): a coach
+        calls this before its session starts, so that no rule update stalls on an import."""
+        ...
+
 
 class BasePolicy:
     """A policy that neither learns from what is performed nor plans phases: it only proposes."""
@@ -145,4 +150,7 @@ class BasePolicy:
         return None
 
     def plan(self, inp: RuleInput) -> Proposal | None:
+        return None
+
+    def warm_up(self) -> None:
         return None

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 from dataclasses import replace
 
 import pytest
@@ -183,3 +185,22 @@ def test_between_marching_and_stepping_the_routine_keeps_its_own_alternation() -
     assert s.adapter.level is None  # the routine's own activities, slot by slot
     mix = s.policy.predict(inp, c, Setting(ROUTINE, s.ladder.index))
     assert ZONE.low <= mix <= ZONE.high
+
+
+@pytest.mark.parametrize("name", ["predictive", "adaptive"])
+def test_warm_up_imports_what_the_first_fit_needs_so_no_rule_update_stalls_on_it(name: str) -> None:
+    # A fresh interpreter: this one may have imported scipy already. Importing the policies must not
+    # load scipy (the launcher lists them); warm_up must, so the fits' lazy imports find it loaded.
+    script = (
+        "import sys\n"
+        "from hri_physio_coach.policies.registry import make_policy\n"
+        f"policy = make_policy({name!r})\n"
+        "before = {m for m in ('scipy.signal', 'scipy.optimize') if m in sys.modules}\n"
+        "policy.warm_up()\n"
+        "after = {m for m in ('scipy.signal', 'scipy.optimize') if m in sys.modules}\n"
+        "print(sorted(before), sorted(after))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120,
+                         check=True)
+    assert out.stdout.split("\n")[0] == "[] ['scipy.optimize', 'scipy.signal']", out.stdout + out.stderr
+
