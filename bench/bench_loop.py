@@ -2,11 +2,14 @@
 
 Runs ``hri_physio_session --speed 1`` (the built-in defaults: simulated participant, receivers,
 processor, coach, controller, mock robot, audio and video streamers, recorder) and, once the
-session has started (the launcher says ``system ready``) and ``--settle`` seconds have passed,
+session has started (the launcher says ``system ready``), waits for the routine's ``--phase``
+(default ``conditioning``, as issue 28 measures it: 480 s in, after calibration and warm-up; the
+exercise, with rule updates, gestures and music changes) and ``--settle`` seconds more. It then
 reads utime + stime from /proc/<pid>/stat of the launcher and of every node process at the start
-and at the end of a ``--seconds`` window (default 60: the first minute of the routine, its
-calibration phase: seated rest, relaxing music and video, reminders). It prints each process's
-CPU time over that window as a share of one core, and the total.
+and at the end of a ``--seconds`` window (default 60), and prints each process's CPU time over
+that window as a share of one core, and the total. ``--phase calibration`` measures the first
+minute instead (seated rest, relaxing music and video, reminders: a quieter loop, 9 minutes less
+per run).
 
 Latency of the input path: this process opens its own LSL inlet on the strap's heart-rate stream
 (``PolarH10/<device>/HR``) and subscribes, like the coach, to the coach's heart-rate input
@@ -285,8 +288,23 @@ def free_port() -> int:
         return probe.getsockname()[1]
 
 
+def phase_start(kind: str) -> float:
+    """Session seconds from the start to the first phase of ``kind`` in the launcher's default routine."""
+    from hri_physio_bringup.options import SessionConfig
+    from hri_physio_bringup.plan import coach_config
+    from hri_physio_coach.evaluate.simulation import session_routine
+
+    start = 0.0
+    for phase in session_routine(coach_config(SessionConfig())).phases:
+        if phase.kind == kind:
+            return start
+        start += phase.duration
+    raise SystemExit(f"the default routine has no {kind} phase")
+
+
 def run_loop(label: str, seconds: float, settle: float, env: dict[str, str] | None = None,
              live: str = "off") -> LoopResult:
+    """The CPU of every process over ``seconds``, from ``settle`` s after the session's start."""
     env = dict(os.environ) if env is None else env
     device = "BENCH" + uuid.uuid4().hex[:6].upper()
     out = Path(tempfile.mkdtemp(prefix="bench_loop_"))
@@ -429,8 +447,11 @@ def main() -> None:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=float, default=60.0,
                         help="measured window, wall = session seconds at 1x (default 60)")
+    parser.add_argument("--phase", choices=("conditioning", "calibration"), default="conditioning",
+                        help="the routine's phase the window is in (default conditioning: it begins 480 s "
+                        "into the session at 1x)")
     parser.add_argument("--settle", type=float, default=5.0,
-                        help="seconds after the session start before the window (default 5)")
+                        help="seconds after the phase's start before the window (default 5)")
     parser.add_argument("--baseline-ref", metavar="REF",
                         help="also run the sources of git commit REF first, and print both side by side")
     parser.add_argument("--baseline", metavar="FILE", help="a run saved with --save, printed side by side")
@@ -441,6 +462,8 @@ def main() -> None:
     parser.add_argument("--demo", action="store_true",
                         help="also time the 23-minute session at 30x (with --baseline-ref: both)")
     args = parser.parse_args()
+    settle = phase_start(args.phase) + args.settle
+    window = f"{LAUNCHER} --speed 1, {args.seconds:g} s from {settle:g} s: the {args.phase} phase"
     print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}, python "
           f"{sys.version.split()[0]}, ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '(a free one)')}")
     base: LoopResult | None = None
@@ -450,12 +473,12 @@ def main() -> None:
     elif args.baseline_ref:
         with tempfile.TemporaryDirectory(prefix="bench_loop_src_") as tmp:
             env = source_tree(args.baseline_ref, Path(tmp))
-            print(f"baseline: {args.baseline_ref} ({LAUNCHER} --speed 1, {args.seconds:g} s)", flush=True)
-            base = run_loop(args.baseline_ref, args.seconds, args.settle, env, live=args.live)
+            print(f"baseline: {args.baseline_ref} ({window})", flush=True)
+            base = run_loop(args.baseline_ref, args.seconds, settle, env, live=args.live)
             if args.demo:
                 base.demo_wall_s = run_demo(env)
-    print(f"now: the working tree ({LAUNCHER} --speed 1, {args.seconds:g} s)", flush=True)
-    now = run_loop("now", args.seconds, args.settle, live=args.live)
+    print(f"now: the working tree ({window})", flush=True)
+    now = run_loop("now", args.seconds, settle, live=args.live)
     if args.demo:
         now.demo_wall_s = run_demo()
     if args.save:
