@@ -30,6 +30,12 @@ class Periodic:
             raise ValueError(f"period must be > 0 s, got {period}")
         self._tasks.append(_Task(period, fn, self._monotonic() + period))
 
+    def next_due_in(self) -> float | None:
+        """Seconds until the next task is due (0: one is due now; None: no tasks)."""
+        if not self._tasks:
+            return None
+        return max(0.0, min(task.due for task in self._tasks) - self._monotonic())
+
     def run_due(self) -> int:
         """Run the tasks that are due (in the order they were added); returns how many ran."""
         ran = 0

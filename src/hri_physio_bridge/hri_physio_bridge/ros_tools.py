@@ -109,6 +109,55 @@ class TakenOnDemand:
         self.node.destroy_node()
 
 
+class MessageArrivals:
+    """Waits until one of some subscriptions that no executor spins holds a message.
+
+    For a loop that takes its messages itself (the recorder): between passes it sleeps in the
+    middleware's wait rather than trying every queue, so a quiet topic costs nothing (an empty take
+    costs 3 us: 52 topics tried 50 times a second were a fifth of a recording session's recorder CPU).
+    :meth:`wake`, from any thread, ends a wait early.
+    """
+
+    def __init__(self, node: Any) -> None:
+        self._context = node.context
+        self._guard = node.create_guard_condition(_never_called)
+        self._wait_set: Any = None
+        self._size = -1
+
+    def wake(self) -> None:
+        self._guard.trigger()
+
+    def wait(self, subs: dict[str, Any], timeout: float) -> list[str]:
+        """The topics of ``subs`` (topic: subscription) that hold a message, once one does, or after
+        ``timeout`` seconds, or when woken (then possibly none)."""
+        from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+
+        if self._wait_set is None or self._size != len(subs):
+            with self._context.handle:
+                self._wait_set = _rclpy.WaitSet(len(subs), 1, 0, 0, 0, 0, self._context.handle)
+            self._size = len(subs)
+        ws = self._wait_set
+        topic_of: dict[int, str] = {}
+        entered: list[Any] = []
+        try:
+            self._context.handle.__enter__()
+            entered.append(self._context.handle)
+            ws.clear_entities()
+            for topic, sub in subs.items():
+                sub.handle.__enter__()
+                entered.append(sub.handle)
+                ws.add_subscription(sub.handle)
+                topic_of[sub.handle.pointer] = topic
+            self._guard.handle.__enter__()
+            entered.append(self._guard.handle)
+            ws.add_guard_condition(self._guard.handle)
+            ws.wait(max(0, int(timeout * 1e9)))
+            return [topic_of[p] for p in ws.get_ready_entities("subscription") if p in topic_of]
+        finally:
+            for handle in reversed(entered):
+                handle.__exit__(None, None, None)
+
+
 def _never_called(_message: Any) -> None:
     """The callback of a :class:`TakenOnDemand` subscription, which no executor runs."""
 

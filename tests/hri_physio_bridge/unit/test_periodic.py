@@ -30,3 +30,18 @@ def test_tasks_run_on_their_periods_and_do_not_catch_up() -> None:
 def test_period_must_be_positive() -> None:
     with pytest.raises(ValueError, match="period must be > 0 s"):
         Periodic().every(0.0, lambda: None)
+
+
+def test_next_due_in_is_the_time_to_the_earliest_task() -> None:
+    now = [0.0]
+    tasks = Periodic(monotonic=lambda: now[0])
+    assert tasks.next_due_in() is None
+    tasks.every(0.25, lambda: None)
+    tasks.every(0.2, lambda: None)
+    assert tasks.next_due_in() == 0.2
+    now[0] = 0.15
+    assert abs(tasks.next_due_in() - 0.05) < 1e-12
+    now[0] = 0.3  # both overdue: due now, never negative
+    assert tasks.next_due_in() == 0.0
+    tasks.run_due()
+    assert abs(tasks.next_due_in() - 0.1) < 1e-12  # the 0.2-s task, next at 0.4

@@ -34,6 +34,7 @@ from hri_physio_bridge.bag.options import RecorderConfig
 from hri_physio_bridge.bag.topic_selection import TopicSelector, bag_name
 from hri_physio_bridge.node_runner import ManagedNode, logic_logger, run_node
 from hri_physio_bridge.periodic import Periodic
+from hri_physio_bridge.ros_tools import MessageArrivals
 
 PROG = "physio_recorder"
 #: The older, shorter name of the same command (kept: users and scripts type it).
@@ -137,6 +138,8 @@ class RecorderNode(ManagedNode):
     Its subscriptions live on a second node that no executor spins: the recording loop takes
     their messages straight from the middleware (:func:`drain_subscriptions`). An executor's
     wait-set pass over every subscription cost about a millisecond per message with 40 topics.
+    Between passes the loop sleeps in one wait on all of them (:class:`MessageArrivals`) and then
+    takes from those that hold messages, rather than trying every queue 50 times a second.
     """
 
     def __init__(self, config: RecorderConfig, topics: list[str], **kwargs: Any) -> None:
@@ -148,6 +151,7 @@ class RecorderNode(ManagedNode):
         self.capture = Node(f"{self.get_name()}_capture", context=self.context,
                             start_parameter_services=False, enable_rosout=False)
         self.subs: dict[str, Any] = {}
+        self.arrivals = MessageArrivals(self.capture)
         started = datetime.now()
         self.selector = TopicSelector(topics, cfg.regex or None, cfg.exclude or None, cfg.include_hidden)
         bag_dir = Path(cfg.output) if cfg.output else Path(cfg.output_dir) / bag_name(cfg.session_id, started)
@@ -167,6 +171,7 @@ class RecorderNode(ManagedNode):
 
     def on_stop(self, signal_name: str) -> None:
         self.get_logger().info(f"{signal_name} received: closing the bag")
+        self.arrivals.wake()
 
     def discover(self) -> None:
         from hri_physio_bridge.bag.recorded_qos import adapted_qos, qos_to_dict
@@ -206,13 +211,21 @@ class RecorderNode(ManagedNode):
                 last_status = now
 
             tasks.every(cfg.status_period, report)
+            ready: list[str] | None = None  # topics that hold messages (None: try every topic)
             while not stop.is_set() and self.context.ok():
                 # Messages wait in the subscriptions' queues (stamped on arrival by the middleware)
-                # and are taken in batches every poll_period; this loop runs the timers itself.
-                _taken, more = drain_subscriptions(self.subs, session.on_message)
+                # and are taken in batches, at most one pass per poll_period, from the topics that hold
+                # some; between passes the loop sleeps until a message arrives or a task is due (it
+                # runs the timers itself).
+                subs = self.subs if ready is None else {t: self.subs[t] for t in ready}
+                _taken, more = drain_subscriptions(subs, session.on_message)
                 tasks.run_due()
-                if not more:
-                    stop.wait(cfg.poll_period)
+                if more:
+                    ready = None
+                    continue
+                if stop.wait(cfg.poll_period):
+                    break
+                ready = self.arrivals.wait(self.subs, min(tasks.next_due_in() or 0.0, 1.0))
             code = self._drain_at_stop()
         except (BagError, OSError) as exc:
             log.error(f"recording failed: {exc}")
