@@ -114,7 +114,7 @@ class MessageArrivals:
 
     For a loop that takes its messages itself (the recorder): between passes it sleeps in the
     middleware's wait rather than trying every queue, so a quiet topic costs nothing (an empty take
-    costs 3 us: 52 topics tried 50 times a second were a fifth of a recording session's recorder CPU).
+    costs 3 us; 52 topics tried 50 times a second were a fifth of the recorder's CPU in a session).
     :meth:`wake`, from any thread, ends a wait early.
     """
 
