@@ -21,8 +21,8 @@ from collections.abc import Callable
 from typing import Any
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
-#: The write end of the pipe installed last (a second installation replaces the first).
-_installed: list[int] = []
+#: The write end of the pipe installed last and its watcher (a second installation replaces the first).
+_installed: list[tuple[int, threading.Thread]] = []
 
 
 def _do_nothing(_signum: int, _frame: Any) -> None:
@@ -41,31 +41,50 @@ def install_stop_handlers(on_stop: Callable[[str], None] | None = None) -> threa
     wanted = {int(s) for s in STOP_SIGNALS}
 
     def watch() -> None:
-        while True:
-            try:
-                received = os.read(read_fd, 64)
-            except OSError:
-                return
-            if not received:
-                return
-            for signum in received:
-                if signum in wanted and not stop.is_set():
-                    # on_stop first: what it records is there for whoever sees the event set.
-                    if on_stop is not None:
-                        on_stop(signal.Signals(signum).name)
-                    stop.set()
+        try:
+            while True:
+                try:
+                    received = os.read(read_fd, 64)
+                except OSError:
+                    return
+                if not received:  # the write end closed: replaced or released
+                    return
+                for signum in received:
+                    if signum in wanted and not stop.is_set():
+                        # on_stop first: what it records is there for whoever sees the event set.
+                        if on_stop is not None:
+                            on_stop(signal.Signals(signum).name)
+                        stop.set()
+        finally:
+            os.close(read_fd)
 
-    threading.Thread(target=watch, name="stop-signals", daemon=True).start()
+    watcher = threading.Thread(target=watch, name="stop-signals", daemon=True)
+    watcher.start()
     previous = signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
-    if previous in _installed:  # ours from an earlier call: its watcher sees the pipe close and ends
-        _installed.remove(previous)
+    for earlier in [entry for entry in _installed if entry[0] == previous]:
+        _installed.remove(earlier)  # an earlier call's: its watcher sees the pipe close and ends
         with contextlib.suppress(OSError):
-            os.close(previous)
-    _installed.append(write_fd)
+            os.close(earlier[0])
+    _installed.append((write_fd, watcher))
     for s in STOP_SIGNALS:
         signal.signal(s, _do_nothing)
     atexit.register(_ignore_stop_signals)
     return stop
+
+
+def release_stop_handlers(timeout: float = 1.0) -> None:
+    """For a process whose stop is done: the watcher ends and lets go of its ``on_stop`` (a node's
+    method holds the whole node, which would otherwise live until the interpreter's exit). Later
+    SIGINT/SIGTERM do nothing. Call it from the main thread."""
+    if not _installed:
+        return
+    write_fd, watcher = _installed.pop()
+    current = signal.set_wakeup_fd(-1)
+    if current not in (write_fd, -1):  # set by someone else since: theirs stays
+        signal.set_wakeup_fd(current)
+    with contextlib.suppress(OSError):
+        os.close(write_fd)  # the watcher reads the end of the pipe and returns
+    watcher.join(timeout)
 
 
 def _ignore_stop_signals() -> None:

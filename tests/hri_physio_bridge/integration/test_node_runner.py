@@ -53,7 +53,7 @@ def test_a_node_that_does_not_apply_a_dynamic_option_refuses_its_change(ros_cont
 
 
 NODE_SCRIPT = """
-import ctypes, sys, threading, time
+import ctypes, gc, sys, threading, time, weakref
 import rclpy
 from hri_physio_bridge import node_runner, ros_tools
 from hri_physio_bridge.config import NodeConfig, option
@@ -61,10 +61,14 @@ from hri_physio_bridge.config import NodeConfig, option
 class Options(NodeConfig):
     status: int = option(3, "the exit status", ge=0)
 
+made = []
+
 class Node(node_runner.ManagedNode):
     def __init__(self, config):
         super().__init__("teardown_test")
         self.config = self.declare_config(config)
+        self.callbacks = [lambda: self]  # a reference cycle, as a streamer's callback makes
+        made.append(weakref.ref(self))
     def run(self, stop):
         print("worked", flush=True)
         return self.config.status
@@ -80,11 +84,18 @@ elif sys.argv[1] == "hang_destroying_the_node":
     Node.destroy_node = lambda self: time.sleep(3600)  # a writer's deletion that never ends
 elif sys.argv[1] == "hang_holding_the_gil":
     Node.destroy_node = lambda self: sleep_holding_the_gil()
-sys.exit(node_runner.run_node("teardown_test", Options, Node, argv=sys.argv[2:]))
+elif sys.argv[1] == "hang_freeing_the_node":
+    Node.__del__ = lambda self: time.sleep(3600)  # a destructor that waits, as native ones can
+gc.disable()  # only run_node may free the node's cycle
+status = node_runner.run_node("teardown_test", Options, Node, argv=sys.argv[2:])
+if made and made[0]() is not None:
+    sys.exit("the node outlived run_node: " + repr(gc.get_referrers(made[0]())))
+sys.exit(status)
 """
 
 
-@pytest.mark.parametrize("mode", ["hang", "hang_destroying_the_node", "hang_holding_the_gil", "normal"])
+@pytest.mark.parametrize("mode", ["hang", "hang_destroying_the_node", "hang_holding_the_gil",
+                                  "hang_freeing_the_node", "normal"])
 def test_a_stuck_middleware_teardown_is_bounded_and_the_work_s_status_is_said_first(mode: str,
                                                                                      tmp_path) -> None:
     import subprocess
@@ -110,7 +121,7 @@ def test_a_stuck_middleware_teardown_is_bounded_and_the_work_s_status_is_said_fi
         assert done.returncode == 1, done.stderr
         assert "Timeout (0:00:03)!" in done.stderr
         hung_in = {"hang": "<lambda>", "hang_destroying_the_node": "<lambda>",
-                   "hang_holding_the_gil": "sleep_holding_the_gil"}[mode]
+                   "hang_holding_the_gil": "sleep_holding_the_gil", "hang_freeing_the_node": "<lambda>"}[mode]
         assert f"in {hung_in}" in done.stderr, done.stderr
 
 

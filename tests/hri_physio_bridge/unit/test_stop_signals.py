@@ -71,3 +71,35 @@ def test_a_stop_wait_in_a_loop_is_ended_by_sigterm_from_another_process() -> Non
     finally:
         if proc.poll() is None:
             proc.kill()
+
+
+def test_release_ends_the_watcher_lets_go_of_on_stop_and_later_signals_do_nothing() -> None:
+    done = run("""
+        import gc, weakref
+        from hri_physio_bridge.stop_signals import release_stop_handlers
+
+        class Holder:  # as a node: on_stop is its method
+            def on_stop(self, name):
+                names.append(name)
+
+        holder = Holder()
+        stop2 = install_stop_handlers(holder.on_stop)
+        deadline = time.monotonic() + 10
+        while len(watchers := [t for t in threading.enumerate() if t.name == "stop-signals"]) > 1:
+            assert time.monotonic() < deadline  # the first installation's watcher ends once replaced
+            time.sleep(0.01)
+        held = weakref.ref(holder)
+        del holder
+        gc.collect()
+        assert held() is not None  # the watcher holds it
+        release_stop_handlers()
+        assert not watchers[0].is_alive()
+        gc.collect()
+        assert held() is None
+        assert signal.set_wakeup_fd(-1) == -1
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(0.3)
+        print("alive", names, stop2.is_set())
+    """)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "alive [] False"
