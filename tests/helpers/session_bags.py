@@ -234,16 +234,26 @@ def bag_messages(bag: Path) -> dict[str, list]:
     return out
 
 
-def check_counter(stamps: np.ndarray, rate: float, gaps: list[tuple[float, float]]) -> int:
+def check_counter(stamps: np.ndarray, rate: float, gaps: list[tuple[float, float]],
+                  off_grid: float = 0.01) -> int:
     """The strap's samples are on a grid of 1/rate: each one between the first and the last recorded is
     in the bag, or inside a recorded gap of its receiver; none twice, none out of order. Returns the
-    samples the gaps account for."""
+    samples the gaps account for.
+
+    ``off_grid``: how far (in sample periods) a step may be from a whole number of periods. Stamps kept
+    as the strap made them are within float rounding; a receiver that adds LSL's clock correction
+    (``sync=1``, across computers) moves them by each change of its estimate."""
     steps = np.diff(stamps) * rate
     bad = np.flatnonzero(steps <= 0.5)
     assert not len(bad), (f"{len(bad)} duplicated or reordered sample(s) of {len(stamps)}, first at index "
                           f"{bad[0] if len(bad) else -1}: stamps around it "
                           f"{stamps[max(0, bad[0] - 3):bad[0] + 5].tolist() if len(bad) else []}")
-    assert np.all(np.abs(steps - np.round(steps)) < 0.01), "samples off the strap's grid"
+    deviation = np.abs(steps - np.round(steps))
+    worst = int(np.argmax(deviation))
+    assert deviation[worst] < off_grid, (
+        f"samples off the strap's grid: {np.count_nonzero(deviation >= off_grid)} step(s) more than "
+        f"{off_grid:g} period off a whole number of periods, the worst {deviation[worst]:.3f} period "
+        f"({deviation[worst] / rate * 1e6:.0f} us) after the sample stamped {float(stamps[worst])!r}")
     accounted = 0
     for i in np.flatnonzero(steps > 1.5):
         before, after = stamps[i], stamps[i + 1]

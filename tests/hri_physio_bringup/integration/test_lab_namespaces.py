@@ -206,7 +206,10 @@ def check_every_strap_sample_in_the_bag(bag: Path) -> dict[str, list]:
         stamps = np.concatenate(messages[topic])
         assert len(stamps) > 100 * rate, (topic, len(stamps))  # minutes of the strap, not a trickle
         try:
-            assert check_counter(stamps, rate, []) == 0
+            # The station adds LSL's clock correction to the strap's stamps; under load one estimate
+            # can differ from the last by more than 1 % of the ECG's period (77 us at 130 Hz): a
+            # quarter period still tells every sample from its neighbours.
+            assert check_counter(stamps, rate, [], off_grid=0.25) == 0
         except AssertionError as exc:
             summary = json.loads((bag.parent / "summary.json").read_text())
             raise AssertionError(f"{topic}: {exc}\nreceivers: {summary['session'].get('receivers')}\n"
