@@ -44,7 +44,7 @@ from hri_physio_bridge.config import (
     load_yaml,
 )
 from hri_physio_bridge.exit_progress import done_line
-from hri_physio_bridge.ros_tools import ExecutorThread, collect_garbage, shut_down_ros
+from hri_physio_bridge.ros_tools import ExecutorThread, shut_down_node_process
 from hri_physio_bridge.stop_signals import install_stop_handlers, release_stop_handlers
 
 C = TypeVar("C", bound=NodeConfig)
@@ -363,8 +363,7 @@ def run_node(
         if code == 0:  # a failed node has said why already, in its error line
             print(done_line(prog, code), file=sys.stderr, flush=True)
         release_stop_handlers()  # its watcher holds the node (on_stop)
-        shut_down_ros(node)
-        del node, spinner
-        collect_garbage()  # what the node left, freed here and bounded, not at the interpreter's exit
+        held, node, spinner = [node], None, None
+        shut_down_node_process(held)  # the node destroyed and freed, then ROS shut down, bounded
     return code
 

@@ -170,7 +170,7 @@ TEARDOWN_TIMEOUT = 5.0
 def shut_down_ros(*nodes: Any, timeout: float | None = None) -> None:
     """Destroy ``nodes``, shut rclpy down and destroy its context (the DDS participant), within
     ``timeout`` (``TEARDOWN_TIMEOUT``): past it, the process prints every thread's stack and exits
-    with status 1.
+    with status 1. (:func:`shut_down_node_process` when the caller can let go of its nodes.)
 
     Left to the interpreter's exit, the participant is deleted by C++ destructors after Python's
     own shutdown, where a hang shows no Python stack and outlasts the launcher's grace. The teardown
@@ -179,28 +179,30 @@ def shut_down_ros(*nodes: Any, timeout: float | None = None) -> None:
     whose work went well has printed :func:`~hri_physio_bridge.exit_progress.done_line` before
     this, so the launcher still knows that it did; a launcher calls this once its summary is written.
     """
+    shut_down_node_process(list(nodes), timeout=timeout)
+
+
+def shut_down_node_process(nodes: list[Any], timeout: float | None = None) -> None:
+    """:func:`shut_down_ros` for nodes the caller lets go of: ``nodes`` is emptied, and once they are
+    destroyed what they left in reference cycles (callbacks that hold their node, wrappers of rcl
+    handles) is freed, while the middleware is still whole, before rclpy shuts down.
+
+    Left to the interpreter's exit, those cycles are collected after the context is gone and the
+    other threads are frozen, with no Python stack and no bound: a processor that had said it was done
+    once stood 15 s "Garbage-collecting" there until the test's SIGABRT.
+    """
     import rclpy
 
     _flush_outputs()
     with _bounded_teardown(timeout):
-        for node in nodes:
+        while nodes:
+            node = nodes.pop()
             if node is not None:
                 node.destroy_node()
+            del node
+        gc.collect()
         rclpy.try_shutdown()
         rclpy.get_default_context().destroy()
-
-
-def collect_garbage(timeout: float | None = None) -> None:
-    """Free now, within ``timeout`` (``TEARDOWN_TIMEOUT``) like the teardown, what a node left in
-    reference cycles (callbacks that hold their node, streamers, wrappers of destroyed handles).
-
-    Left to the interpreter's exit, they are collected after the other threads are frozen, with no
-    Python stack to show and no bound: a processor that had said it was done once stood 15 s
-    "Garbage-collecting" there until the test's SIGABRT. Call it once the caller holds no node.
-    """
-    _flush_outputs()
-    with _bounded_teardown(timeout):
-        gc.collect()
 
 
 @contextlib.contextmanager
