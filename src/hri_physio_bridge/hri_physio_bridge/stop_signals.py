@@ -61,8 +61,9 @@ def install_stop_handlers(on_stop: Callable[[str], None] | None = None) -> threa
     watcher = threading.Thread(target=watch, name="stop-signals", daemon=True)
     watcher.start()
     previous = signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
-    for earlier in [entry for entry in _installed if entry[0] == previous]:
-        _installed.remove(earlier)  # an earlier call's: its watcher sees the pipe close and ends
+    earlier = next((entry for entry in _installed if entry[0] == previous), None)
+    if earlier is not None:  # an earlier call's: its watcher sees the pipe close and ends
+        _installed.remove(earlier)
         with contextlib.suppress(OSError):
             os.close(earlier[0])
     _installed.append((write_fd, watcher))

@@ -225,7 +225,8 @@ class RecorderNode(ManagedNode):
                     continue
                 if stop.wait(cfg.poll_period):
                     break
-                ready = self.arrivals.wait(self.subs, min(tasks.next_due_in() or 0.0, 1.0))
+                due = tasks.next_due_in()  # None: no task to wake for
+                ready = self.arrivals.wait(self.subs, 1.0 if due is None else min(due, 1.0))
             code = self._drain_at_stop()
         except (BagError, OSError) as exc:
             log.error(f"recording failed: {exc}")
