@@ -52,7 +52,7 @@ class RecorderConfig(NodeConfig):
     drain_timeout: float = option(10.0, "at a stop, the most time spent writing what the subscriptions "
                                   "already hold (up to qos_depth per topic); a topic still delivering after "
                                   "that is left, with an error line", unit="s", gt=0)
-    poll_period: float = option(0.02, "time between takes of queued messages while they flow; receive "
+    poll_period: float = option(0.1, "time between takes of queued messages while they flow; receive "
                                 "stamps come from the middleware, so this only delays the disk",
                                 unit="s", gt=0)
 
