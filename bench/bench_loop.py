@@ -30,6 +30,9 @@ the figures as JSON; ``--baseline FILE`` prints a saved run next to this one ins
 viewer connected); ``--live watched`` also connects a Foxglove WebSocket client that subscribes to
 every channel for the whole window (the messages and bytes it took are printed).
 
+The table also gives a floor: ``floor_node.py`` (an rclpy node that only follows ``/clock``) runs in
+the session's domain over the same window, the least any node on the sim clock costs on this machine.
+
 Run:  source scripts/env.sh && python bench/bench_loop.py --baseline-ref HEAD~5
 """
 
@@ -72,6 +75,8 @@ class LoopResult:
     cpu: dict[str, float] = field(default_factory=dict)  # % of one core, by node
     latency_ms: list[float] = field(default_factory=list)
     demo_wall_s: float | None = None
+    #: % of one core of floor_node.py over the same window: an rclpy node that only follows /clock.
+    floor: float | None = None
 
     @property
     def total(self) -> float:
@@ -332,6 +337,7 @@ def run_loop(label: str, seconds: float, settle: float, env: dict[str, str] | No
     threading.Thread(target=read, daemon=True).start()
     result = LoopResult(label, seconds)
     probe: LatencyProbe | None = None
+    floor: subprocess.Popen | None = None
     try:
         deadline = time.monotonic() + 300
         while not ready.wait(0.5):
@@ -340,17 +346,25 @@ def run_loop(label: str, seconds: float, settle: float, env: dict[str, str] | No
         if not domain:
             raise RuntimeError(f"{label}: the session did not say its ROS domain:\n" + "\n".join(lines[-20:]))
         probe = LatencyProbe(device, "/physio/polar_h10/hr", domain[0])
+        floor_cmd = [sys.executable, str(HERE.parent / "floor_node.py"), "--domain", str(domain[0])]
+        floor = subprocess.Popen(floor_cmd, env=env)
         if live == "watched":
             viewer = LiveViewer(f"ws://127.0.0.1:{port}")
         time.sleep(settle)
         pids = {proc.pid: LAUNCHER, **{p: node_name(p) for p in descendants(proc.pid)}}
         start = {pid: cpu_seconds(pid) for pid in pids}
+        floor_start = cpu_seconds(floor.pid)
         probe.start_measuring()
         wall0 = time.monotonic()
         taken0 = (viewer.messages, viewer.bytes) if viewer is not None else (0, 0)
         time.sleep(seconds)
         end = {pid: cpu_seconds(pid) for pid in pids}
+        floor_end = cpu_seconds(floor.pid)
         wall = time.monotonic() - wall0
+        if floor_start is not None and floor_end is not None and floor.poll() is None:
+            result.floor = (floor_end - floor_start) / wall * 100.0
+        else:
+            print(f"warning: {label}: floor_node.py ended early (status {floor.poll()})", file=sys.stderr)
         if viewer is not None:
             print(f"{label}: the live viewer took {viewer.messages - taken0[0]} messages, "
                   f"{(viewer.bytes - taken0[1]) / 1e6:.2f} MB in the window"
@@ -368,6 +382,12 @@ def run_loop(label: str, seconds: float, settle: float, env: dict[str, str] | No
     finally:
         if viewer is not None:
             viewer.close()
+        if floor is not None:
+            floor.send_signal(signal.SIGINT)
+            try:
+                floor.wait(30)
+            except subprocess.TimeoutExpired:
+                floor.kill()
         if proc.poll() is None:
             proc.send_signal(signal.SIGINT)
             try:
@@ -416,6 +436,11 @@ def table(now: LoopResult, base: LoopResult | None) -> None:
         print(f"{n:<22} {fmt(old):>9} {fmt(now.cpu.get(n)):>7} {ratio(now.cpu.get(n), old):>9}")
     old_total = base.total if base else None
     print(f"{'total':<22} {fmt(old_total):>9} {fmt(now.total):>7} {ratio(now.total, old_total):>9}")
+    old_floor = base.floor if base else None
+    print(f"{'floor (not in total)':<22} {fmt(old_floor):>9} {fmt(now.floor):>7} "
+          f"{ratio(now.floor, old_floor):>9}")
+    print("  floor: floor_node.py in the session's domain, an rclpy node that only follows /clock: the\n"
+          "  least any node on the session's sim clock costs on this machine (under any waiting node)")
     print("\n== Input path: strap HR sample on LSL -> the coach's input topic ==")
     print(f"{'':<22} {'baseline':>9} {'now':>7} {'now/base':>9}")
     for q in (50, 99):
@@ -436,6 +461,8 @@ def goals(now: LoopResult) -> None:
     line("whole loop at 1x", now.total, GOALS["total"], " %")
     worst = max((now.cpu.get(n, 0.0), n) for n in WAITERS)
     line(f"worst waiting node ({worst[1]})", worst[0], GOALS["waiter"], " %")
+    if now.floor is not None:
+        print(f"  {'  (the floor: a node that only follows /clock)':<44} {fmt(now.floor, ' %'):>9}")
     line("video_streamer", now.cpu.get("video_streamer"), GOALS["video_streamer"], " %")
     line("neurokit_processor", now.cpu.get("neurokit_processor"), GOALS["neurokit_processor"], " %")
     line("LSL -> coach input p99", now.p(99), GOALS["latency_p99_ms"], " ms")

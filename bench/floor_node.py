@@ -1,0 +1,52 @@
+"""The least a node on a session's sim clock costs: an rclpy node that only follows ``/clock``.
+
+A node with ``use_sim_time`` wakes on every ``/clock`` message (ten a second at 1x) however little
+else it does. This one has nothing but what every rclpy node has (parameter services, the clock
+subscription rclpy makes for sim time) and spins on the project's executor, as the session's nodes
+do. ``bench_loop.py`` runs it in the session's ROS domain beside the session and prints its CPU as
+the floor under the waiting nodes' figures. Runs until SIGINT or SIGTERM.
+
+    python bench/floor_node.py --domain 42
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import uuid
+
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.parameter import Parameter
+
+from hri_physio_bridge.executor import LeanExecutor
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--domain", type=int, required=True, help="the session's ROS domain")
+    args = parser.parse_args()
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=args.domain)
+    node = rclpy.create_node(f"bench_floor_{uuid.uuid4().hex[:6]}", context=context,
+                             parameter_overrides=[Parameter("use_sim_time", value=True)])
+    executor = LeanExecutor(context=context)
+    executor.add_node(node)
+
+    stopped: list[int] = []
+    signal.signal(signal.SIGINT, lambda signum, _frame: stopped.append(signum))
+    signal.signal(signal.SIGTERM, lambda signum, _frame: stopped.append(signum))
+    try:
+        while not stopped and context.ok():
+            executor.spin_once(timeout_sec=0.5)  # a stop is seen within this
+    except ExternalShutdownException:
+        pass
+    finally:
+        executor.shutdown(timeout_sec=1.0)
+        node.destroy_node()
+        context.try_shutdown()
+
+
+if __name__ == "__main__":
+    main()
