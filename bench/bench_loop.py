@@ -33,7 +33,10 @@ every channel for the whole window (the messages and bytes it took are printed).
 The table also gives a floor: ``floor_node.py`` (an rclpy node that only follows ``/clock``) runs in
 the session's domain over the same window, the least any node on the sim clock costs on this machine.
 
-Run:  source scripts/env.sh && python bench/bench_loop.py --baseline-ref HEAD~5
+``--rounds N`` alternates the two sides N times each (baseline, now, now, baseline, ...) and averages:
+this machine drifts by 10-15 % over minutes, which one pair of runs would read as a change.
+
+Run:  source scripts/env.sh && python bench/bench_loop.py --baseline-ref HEAD~5 --rounds 2
 """
 
 from __future__ import annotations
@@ -403,6 +406,17 @@ def run_loop(label: str, seconds: float, settle: float, env: dict[str, str] | No
     return result
 
 
+def merged(rounds: list[LoopResult]) -> LoopResult:
+    """One side's rounds as one result: each process's mean CPU, every latency, the mean floor."""
+    out = LoopResult(rounds[0].label, rounds[0].seconds)
+    for name in {n for r in rounds for n in r.cpu}:
+        out.cpu[name] = float(np.mean([r.cpu[name] for r in rounds if name in r.cpu]))
+    out.latency_ms = [x for r in rounds for x in r.latency_ms]
+    floors = [r.floor for r in rounds if r.floor is not None]
+    out.floor = float(np.mean(floors)) if floors else None
+    return out
+
+
 def run_demo(env: dict[str, str] | None = None) -> float:
     """Wall seconds of the whole 23-minute session at the default speed (what scripts/demo runs)."""
     out = Path(tempfile.mkdtemp(prefix="bench_demo_"))
@@ -486,9 +500,14 @@ def main() -> None:
     parser.add_argument("--live", choices=("off", "idle", "watched"), default="off",
                         help="run the session with its live view: no viewer (idle) or a client subscribed "
                         "to every channel (watched); live_view's CPU is in the table")
+    parser.add_argument("--rounds", type=int, default=1,
+                        help="sessions per side, alternated (baseline, now, now, baseline, ...); the table "
+                        "gives each node's mean CPU and the latencies of every round (default 1)")
     parser.add_argument("--demo", action="store_true",
                         help="also time the 23-minute session at 30x (with --baseline-ref: both)")
     args = parser.parse_args()
+    if args.rounds < 1:
+        parser.error("--rounds must be at least 1")
     settle = phase_start(args.phase) + args.settle
     window = f"{LAUNCHER} --speed 1, {args.seconds:g} s from {settle:g} s: the {args.phase} phase"
     print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f}, python "
@@ -497,15 +516,26 @@ def main() -> None:
     if args.baseline:
         data = json.loads(Path(args.baseline).read_text())
         base = LoopResult(**data)
-    elif args.baseline_ref:
-        with tempfile.TemporaryDirectory(prefix="bench_loop_src_") as tmp:
-            env = source_tree(args.baseline_ref, Path(tmp))
-            print(f"baseline: {args.baseline_ref} ({window})", flush=True)
-            base = run_loop(args.baseline_ref, args.seconds, settle, env, live=args.live)
+    with tempfile.TemporaryDirectory(prefix="bench_loop_src_") as tmp:
+        env = source_tree(args.baseline_ref, Path(tmp)) if args.baseline_ref else None
+        bases: list[LoopResult] = []
+        nows: list[LoopResult] = []
+        for i in range(args.rounds):
+            # baseline, now | now, baseline | ...: a machine that drifts (slower or faster over the
+            # run) weighs on both sides alike
+            order = ["base", "now"] if i % 2 == 0 else ["now", "base"]
+            for which in order:
+                if which == "base" and env is not None:
+                    print(f"baseline: {args.baseline_ref} ({window}), round {i + 1}", flush=True)
+                    bases.append(run_loop(args.baseline_ref, args.seconds, settle, env, live=args.live))
+                elif which == "now":
+                    print(f"now: the working tree ({window}), round {i + 1}", flush=True)
+                    nows.append(run_loop("now", args.seconds, settle, live=args.live))
+        if bases:
+            base = merged(bases)
             if args.demo:
                 base.demo_wall_s = run_demo(env)
-    print(f"now: the working tree ({window})", flush=True)
-    now = run_loop("now", args.seconds, settle, live=args.live)
+    now = merged(nows)
     if args.demo:
         now.demo_wall_s = run_demo()
     if args.save:
