@@ -495,7 +495,8 @@ def main() -> None:
                         help="seconds after the phase's start before the window (default 5)")
     parser.add_argument("--baseline-ref", metavar="REF",
                         help="also run the sources of git commit REF first, and print both side by side")
-    parser.add_argument("--baseline", metavar="FILE", help="a run saved with --save, printed side by side")
+    parser.add_argument("--baseline", metavar="FILE",
+                        help="a run saved with --save, printed side by side (then --baseline-ref is not run)")
     parser.add_argument("--save", metavar="FILE", help="write this run's figures as JSON")
     parser.add_argument("--live", choices=("off", "idle", "watched"), default="off",
                         help="run the session with its live view: no viewer (idle) or a client subscribed "
@@ -517,7 +518,7 @@ def main() -> None:
         data = json.loads(Path(args.baseline).read_text())
         base = LoopResult(**data)
     with tempfile.TemporaryDirectory(prefix="bench_loop_src_") as tmp:
-        env = source_tree(args.baseline_ref, Path(tmp)) if args.baseline_ref else None
+        env = source_tree(args.baseline_ref, Path(tmp)) if args.baseline_ref and not args.baseline else None
         bases: list[LoopResult] = []
         nows: list[LoopResult] = []
         for i in range(args.rounds):
