@@ -6,6 +6,7 @@ of session at most. Everything else is in the session folder, checked against th
 
 from __future__ import annotations
 
+import itertools
 import json
 import re
 import subprocess
@@ -86,6 +87,20 @@ def test_the_session_folder_holds_everything(demo: tuple[Run, Path]) -> None:
     assert (folder / "hrv.png").is_file()
 
 
+def _gesture_repeat_lag(coach: list[dict], robot: list[dict]) -> tuple[float, float]:
+    """(The coach's largest lag in repeating a gesture: a repeat's time less when it was due, 0 at
+    least; the longest gesture at the slowest speed commanded), in sim seconds, from the bag's events."""
+    length = {e["name"]: e["recorded_duration"] for e in robot if e.get("event") == "gesture_started"}
+    commands = [e for e in coach if e["event"] == "command" and e["command"].startswith("set gesture ")]
+    lag = 0.0
+    for sent, repeat in itertools.pairwise(commands):
+        if repeat["why"] == "gesture repeat":
+            _set, _gesture, name, speed = sent["command"].split()
+            lag = max(lag, repeat["t"] - (sent["t"] + length[name] / float(speed)))
+    slowest = min(float(e["command"].split()[3]) for e in commands)
+    return lag, max(length.values()) / slowest
+
+
 def test_the_bag_holds_the_whole_session_with_no_sample_lost(demo: tuple[Run, Path],
                                                              session_tag: str) -> None:
     from hri_physio_bridge.ros_frames import msg_to_frame
@@ -109,15 +124,22 @@ def test_the_bag_holds_the_whole_session_with_no_sample_lost(demo: tuple[Run, Pa
     assert performed == [g for i, g in enumerate(commanded) if i == 0 or g != commanded[i - 1]]
     assert performed[:2] == GESTURES[:2] and set(performed) <= set(GESTURES)
     # The robot leads each exercise activity for its whole length: its gesture starts again and again
-    # (gestures last 3-4.5 s; the exact cadence is tested on a fake clock in tests/coach. At 30x on a
-    # loaded machine the coach's ticks and the robot's replies lag by a few seconds of sim time.)
+    # (gestures last 3-4.5 s; the exact cadence is tested on a fake clock in tests/coach). The coach
+    # repeats a gesture once it has played for its length on the coach's clock; at 30x on a loaded
+    # machine a starved coach process repeats late, by as much as its clock jumped meanwhile (0.4 s of
+    # wall time is 12 s of sim time). That lag is in the bag: each repeat's time less when it was due.
     activities = [e for e in coach if e["event"] == "activity" and e.get("gesture")]
     ends = [e["t"] for e in activities[1:]] + [end]
     starts = [e["t"] for e in robot if e.get("event") == "gesture_started"]
+    lag, longest = _gesture_repeat_lag(coach, robot)
     for activity, activity_end in zip(activities, ends, strict=True):
         inside = [t for t in starts if activity["t"] <= t < activity_end]
         assert len(inside) >= (activity_end - activity["t"]) / 10.0, (activity, len(inside))
-        assert activity_end - max(inside) < 12.0, activity
+        # the last start is one gesture, the coach's largest lag and the robot's reaction from the end
+        # (12 s would do on an idle machine)
+        allowed = max(12.0, longest + lag + 2.0)
+        last = activity_end - max(inside)
+        assert last < allowed, (activity, f"last start {last:.1f} s before the end; allowed {allowed:.1f} s")
 
     # The participant followed the robot: exercise raised the (true, model) heart rate.
     model = [json.loads(m.data) for m in msgs["/participant/state"]]
