@@ -22,6 +22,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT / "tests" / "data"
 SRC = ROOT / "src"
+#: Seconds a test waits for a NeuroKit2 node's first sign of life (its subscription, outlet or first
+#: line): the processor and the simulator import NeuroKit2 before anything else, and on a loaded CI
+#: machine (three test workers beside the session tests and a busy core) that took 50-60 s once.
+NEUROKIT_START = 120.0
 
 
 def wait_until(predicate: Callable[[], bool], timeout: float, what: str | Callable[[], str],

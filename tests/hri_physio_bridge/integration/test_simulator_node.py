@@ -10,7 +10,7 @@ import numpy as np
 import pylsl
 import pytest
 
-from helpers import NodeProcess, resolve_lsl
+from helpers import NEUROKIT_START, NodeProcess, resolve_lsl
 
 pytestmark = pytest.mark.lsl
 
@@ -44,7 +44,7 @@ def test_cli_streams_named_like_a_polar_strap_and_the_ramp_arrives_complete(lsl_
     ) as sim:
         # It says so after loading NeuroKit2 and simulating every signal: on a busy machine (CI,
         # three test workers beside the session tests) that took more than 30 s once.
-        sim.wait_for_output("streaming", timeout=120)
+        sim.wait_for_output("streaming", timeout=NEUROKIT_START)
         found = resolve_lsl(pred=f"starts-with(name,'{lsl_name}/')", minimum=len(KINDS))
         by_name = {info.name(): info for info in found}
         assert sorted(by_name) == sorted(f"{lsl_name}/{kind}" for kind in KINDS.values()), sim.output
@@ -81,7 +81,7 @@ def test_cli_streams_named_like_a_polar_strap_and_the_ramp_arrives_complete(lsl_
 def test_cli_stops_cleanly_on_a_signal_in_continuous_mode(lsl_name: str, sig: signal.Signals) -> None:
     with NodeProcess("physio_simulator", "--continuous", "--signals", "ramp,hr", "--rate", "50",
                      "--name-prefix", lsl_name) as sim:
-        sim.wait_for_output("until stopped", timeout=120)  # after NeuroKit2, as above
+        sim.wait_for_output("until stopped", timeout=NEUROKIT_START)  # after NeuroKit2, as above
         found = resolve_lsl(f"{lsl_name}/NeuroKitSim/SIM0001/RAMP")
         assert found, sim.output
         inlet = pylsl.StreamInlet(found[0])

@@ -15,7 +15,7 @@ import numpy as np
 import pylsl
 import pytest
 
-from helpers import NodeProcess, own_lines, resolve_lsl, wait_until
+from helpers import NEUROKIT_START, NodeProcess, own_lines, resolve_lsl, wait_until
 from helpers.processing import Outputs, nk_direct_ecg, random_chunks
 from hri_physio_processing.features import FREQUENCY_SCALARS, HEART_SCALARS
 
@@ -92,7 +92,8 @@ def test_an_lsl_input_still_to_appear_is_waited_for_idly(lsl_name: str, collecto
                 return max((s["attempts"] for s in out.status if s.get("event") == "waiting_for_input"),
                            default=0)
 
-        wait_until(lambda: attempts() >= 1, 60, lambda: f"a waiting_for_input status\n{proc.output}")
+        wait_until(lambda: attempts() >= 1, NEUROKIT_START,
+                   lambda: f"a waiting_for_input status\n{proc.output}")
         cpu0, t0, first = _cpu_seconds(proc.proc.pid), time.monotonic(), attempts()
         # Three more attempts (each logged at once if the log were not rate-limited) to measure over.
         wait_until(lambda: attempts() >= first + 3, 60, "three more attempts to open the input")
@@ -108,7 +109,7 @@ def test_an_lsl_input_still_to_appear_is_waited_for_idly(lsl_name: str, collecto
 def test_clean_exit_on_signal_while_waiting(sig: int, lsl_name: str, collector) -> None:
     topic = f"/test/{lsl_name.split('/')[0]}/idle{int(sig)}"
     with NodeProcess("neurokit_processor", "--input", f"ros:{topic}") as proc:
-        wait_until(lambda: collector.node.count_subscribers(topic) > 0, 60,
+        wait_until(lambda: collector.node.count_subscribers(topic) > 0, NEUROKIT_START,
                    lambda: f"the processor's subscription:\n{proc.output}")
         assert proc.stop(sig) == 0, proc.output
     assert "Traceback" not in proc.output
@@ -118,7 +119,7 @@ def test_ctrl_c_while_an_lsl_input_has_not_appeared(lsl_name: str) -> None:
     args = ("--input", f"lsl:{lsl_name}/never", "--resolve-timeout", "60", "--output-prefix",
             f"/test/{lsl_name.split('/')[0]}/never")
     with NodeProcess("neurokit_processor", *args) as proc:
-        proc.wait_for_output("opening", 60)  # now inside a 60 s resolve
+        proc.wait_for_output("opening", NEUROKIT_START)  # now inside a 60 s resolve
         assert proc.stop(signal.SIGINT, timeout=15) == 0, proc.output
     assert "Traceback" not in proc.output
 
@@ -136,7 +137,8 @@ def publish_stream(ros_context, topic: str, t: np.ndarray, x: np.ndarray, chunks
     node = Node("ecg_source", context=ros_context)
     pub = node.create_publisher(Float64MultiArray, topic, frame_qos())
     try:
-        wait_until(lambda: pub.get_subscription_count() > 0 and ready(), 60, "processor subscription")
+        wait_until(lambda: pub.get_subscription_count() > 0 and ready(), NEUROKIT_START,
+                   "processor subscription")
         for i, (a, b) in enumerate(chunks):
             pub.publish(frame_to_msg(Frame(t[a:b], x[a:b].reshape(-1, 1))))
             if i % 50 == 49:
@@ -203,7 +205,7 @@ def test_lsl_outputs(mitdb, ros_context, collector, lsl_name: str, tmp_path: Pat
     with NodeProcess("neurokit_processor", "--input", f"ros:{topic}", "--output-prefix", prefix,
                      "--window-seconds", "10", "--hop-seconds", "5", "--min-window-seconds", "5",
                      "--lsl-output", "true", "--lsl-prefix", f"{lsl_name}/proc") as proc:
-        wait_until(lambda: collector.node.count_subscribers(topic) > 0, 60,  # outputs open before the input
+        wait_until(lambda: collector.node.count_subscribers(topic) > 0, NEUROKIT_START,  # outputs first
                    lambda: f"the processor's subscription:\n{proc.output}")
         infos = resolve_lsl(f"{lsl_name}/proc/hr")
         assert infos, proc.output

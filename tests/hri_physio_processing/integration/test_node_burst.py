@@ -14,7 +14,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from helpers import NodeProcess, wait_until
+from helpers import NEUROKIT_START, NodeProcess, wait_until
 from helpers.processing import Outputs
 
 pytestmark = pytest.mark.ros
@@ -38,7 +38,7 @@ def burst(ros_context, topic: str, t: np.ndarray, x: np.ndarray, paced_tail: int
     node = Node("ecg_burst", context=ros_context)
     pub = node.create_publisher(Float64MultiArray, topic, frame_qos())  # as physio_receiver's output
     try:
-        wait_until(lambda: pub.get_subscription_count() > 0, 60, "the processor's subscription")
+        wait_until(lambda: pub.get_subscription_count() > 0, NEUROKIT_START, "the processor's subscription")
         tail = t.shape[0] - paced_tail
         for a in range(0, t.shape[0], FRAME):
             if a < warm_up:

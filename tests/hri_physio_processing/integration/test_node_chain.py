@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from helpers import NodeProcess, wait_until
+from helpers import NEUROKIT_START, NodeProcess, wait_until
 from helpers.processing import Outputs, match_beats
 
 pytestmark = pytest.mark.ros
@@ -30,7 +30,8 @@ def test_mitdb_through_receiver_and_processor(mitdb, collector, lsl_name: str, t
     out = Outputs(collector, topic)
     with NodeProcess("neurokit_processor", "--input", f"ros:{topic}", "--window-seconds", "60",
                      "--hop-seconds", "5", "--quality-method", "none", "--wait-for-consumers", "30") as proc:
-        wait_until(lambda: collector.node.count_subscribers(topic) > 0, 60,  # every output has a consumer
+        # every output has a consumer
+        wait_until(lambda: collector.node.count_subscribers(topic) > 0, NEUROKIT_START,
                    lambda: f"the processor's subscription:\n{proc.output}")
         with NodeProcess("physio_receiver", "--input", f"csv:{log}?rate=0", "--output", f"ros:{topic}",
                          "--output-frame", "1300", "--input-frame", "1300",
@@ -62,7 +63,7 @@ def test_simulator_receiver_processor_chain(collector, lsl_name: str) -> None:
     stream = f"{lsl_name}/PolarH10/SIM0001/ECG"
     with NodeProcess("neurokit_processor", "--input", f"ros:{topic}", "--window-seconds", "8",
                      "--hop-seconds", "4", "--min-window-seconds", "4", "--wait-for-consumers", "30") as proc:
-        wait_until(lambda: collector.node.count_subscribers(topic) > 0, 60,
+        wait_until(lambda: collector.node.count_subscribers(topic) > 0, NEUROKIT_START,
                    lambda: f"the processor's subscription:\n{proc.output}")
         # The receiver waits for the simulator's stream as long as the simulator waits for it (a busy
         # machine starts either of them late).
