@@ -90,15 +90,16 @@ def test_the_session_folder_holds_everything(demo: tuple[Run, Path]) -> None:
 def _gesture_repeat_lag(coach: list[dict], robot: list[dict]) -> tuple[float, float]:
     """(The coach's largest lag in repeating a gesture: a repeat's time less when it was due, 0 at
     least; the longest gesture at the slowest speed commanded), in sim seconds, from the bag's events."""
+    from qt_controller.commands import SetGesture, parse_command
+
     length = {e["name"]: e["recorded_duration"] for e in robot if e.get("event") == "gesture_started"}
-    commands = [e for e in coach if e["event"] == "command" and e["command"].startswith("set gesture ")]
+    commands = [(e, parse_command(e["command"])) for e in coach if e["event"] == "command"]
+    gestures = [(e, c) for e, c in commands if isinstance(c, SetGesture)]
     lag = 0.0
-    for sent, repeat in itertools.pairwise(commands):
+    for (sent, gesture), (repeat, _) in itertools.pairwise(gestures):
         if repeat["why"] == "gesture repeat":
-            _set, _gesture, name, speed = sent["command"].split()
-            lag = max(lag, repeat["t"] - (sent["t"] + length[name] / float(speed)))
-    slowest = min(float(e["command"].split()[3]) for e in commands)
-    return lag, max(length.values()) / slowest
+            lag = max(lag, repeat["t"] - (sent["t"] + length[gesture.name] / gesture.speed))
+    return lag, max(length.values()) / min(g.speed for _, g in gestures)
 
 
 def test_the_bag_holds_the_whole_session_with_no_sample_lost(demo: tuple[Run, Path],
