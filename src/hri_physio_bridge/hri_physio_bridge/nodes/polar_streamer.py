@@ -32,7 +32,7 @@ from hri_physio_bridge.node_runner import ManagedNode, fail, logic_logger, run_n
 from hri_physio_bridge.polar.ble import BleError, ClientFactory, Scanner
 from hri_physio_bridge.polar.capture import CaptureError, CaptureWriter, read_capture
 from hri_physio_bridge.polar.config import PolarConfig
-from hri_physio_bridge.polar.devices import help_values
+from hri_physio_bridge.polar.devices import help_values, matches
 from hri_physio_bridge.polar.fake import FakePolarDevice, FakeScanner, fake_client_factory
 from hri_physio_bridge.polar.lsl_output import LslSink
 from hri_physio_bridge.polar.session import PolarSession, describe_adverts, scan_for_polar
@@ -56,9 +56,18 @@ class PolarStreamerNode(ManagedNode):
         self.replay_device: FakePolarDevice | None = None
         self.session_config = cfg
         if cfg.replay:
-            self.replay_device = FakePolarDevice.from_capture(
-                read_capture(cfg.replay), speed=cfg.replay_speed
-            )
+            capture = read_capture(cfg.replay)
+            for warning in capture.warnings:
+                self.log.warning(warning)
+            self.replay_device = FakePolarDevice.from_capture(capture, speed=cfg.replay_speed)
+            if not self.replay_device.timeline:
+                raise CaptureError(f"capture file {cfg.replay} holds no notification to replay")
+            recorded_device = self.replay_device
+            if cfg.device and not matches(cfg.device, recorded_device.name, recorded_device.address):
+                raise ConfigError(
+                    f"device: {cfg.device!r} is not the device of capture {cfg.replay} "
+                    f"({recorded_device.name}, {recorded_device.address}); leave --device out to replay it"
+                )
             if not cfg.streams:  # what the capture holds, not what the sensor could send
                 recorded = self.replay_device.recorded_streams()
                 self.session_config = cfg.model_copy(update={"streams": recorded or cfg.streams})
@@ -143,6 +152,9 @@ class PolarStreamerNode(ManagedNode):
         status = self.session.status()
         status["t"] = time.time()
         status["node"] = self.get_fully_qualified_name()
+        if self.replay_device is not None:
+            # Recorded notifications the replay did not pass on: link down, or their stream not started.
+            status["replay_undelivered"] = self.replay_device.lost
         self.status_pub.publish(String(data=json.dumps(status)))
         if log:
             streams = ", ".join(

@@ -42,10 +42,10 @@ from hri_physio_bridge.polar.ble import (
     NotifyCallback,
     PairingRequiredError,
 )
-from hri_physio_bridge.polar.capture import Capture
+from hri_physio_bridge.polar.capture import Capture, CaptureError, CaptureRecord
 from hri_physio_bridge.polar.devices import STREAM_KINDS
 from hri_physio_bridge.polar.gatt import BATTERY_LEVEL, HEART_RATE_MEASUREMENT, PMD_CONTROL_POINT, PMD_DATA
-from hri_physio_bridge.polar.protocol import PolarProtocolError, decode_heart_rate
+from hri_physio_bridge.polar.protocol import Measurement, PolarProtocolError, decode_heart_rate
 from hri_physio_bridge.polar.virtual_time import FakeClock
 
 if TYPE_CHECKING:
@@ -59,6 +59,7 @@ __all__ = [
 #: The source name of Heart Rate Measurement notifications in ``stall_after`` (PMD sources are
 #: measurement types).
 HR_SOURCE = "hr"
+KNOWN_MEASUREMENTS = frozenset(int(m) for m in Measurement)
 #: What heals a stalled source: a restart of it, a new connection, or nothing.
 STALL_HEALS = ("restart", "reconnect", "never")
 
@@ -167,21 +168,12 @@ class FakePolarDevice:
         start_params: dict[int, bytes] = {}
         timeline: list[Notification] = []
         for rec in capture.records:
-            if rec.op == "read" and rec.char == PMD_CONTROL_POINT and not features:
-                features = cp.decode_features(rec.data)
-                kwargs.setdefault("sdk_mode", cp.has_sdk_mode(rec.data))
-            elif rec.op == "read" and rec.char == BATTERY_LEVEL and battery is None and len(rec.data) == 1:
+            try:
+                cls._take_record(rec, features, settings, start_params, timeline, kwargs)
+            except PolarProtocolError as exc:
+                raise CaptureError(f"{capture.where(rec)}: {exc}") from None
+            if rec.op == "read" and rec.char == BATTERY_LEVEL and battery is None and len(rec.data) == 1:
                 battery = rec.data[0]
-            elif rec.op == "notify" and rec.char == PMD_CONTROL_POINT:
-                message = cp.decode_control_point(rec.data)
-                if isinstance(message, cp.StopIndication):
-                    timeline.append(Notification(rec.t, rec.char, rec.data))
-                elif message.op == cp.OpCode.GET_SETTINGS and message.measurement not in settings:
-                    settings[message.measurement] = message.params
-                elif message.op == cp.OpCode.START and message.measurement not in start_params:
-                    start_params[message.measurement] = message.params
-            elif rec.op == "notify" and rec.char in (PMD_DATA, HEART_RATE_MEASUREMENT):
-                timeline.append(Notification(rec.t, rec.char, rec.data))
         device = capture.header.get("device", {}) if isinstance(capture.header.get("device"), dict) else {}
         kwargs.setdefault("name", device.get("name", "Polar H10 0A1B2C3D"))
         kwargs.setdefault("address", device.get("address", "A0:9E:1A:00:00:01"))
@@ -193,6 +185,26 @@ class FakePolarDevice:
             timeline=timeline,
             **kwargs,
         )
+
+    @staticmethod
+    def _take_record(rec: CaptureRecord, features: set[int], settings: dict[int, bytes],
+                     start_params: dict[int, bytes], timeline: list[Notification],
+                     kwargs: dict[str, Any]) -> None:
+        """What one capture record tells about the device (features, settings, start answers) or
+        adds to its timeline; :class:`PolarProtocolError` when a control-point record is not one."""
+        if rec.op == "read" and rec.char == PMD_CONTROL_POINT and not features:
+            features.update(cp.decode_features(rec.data))
+            kwargs.setdefault("sdk_mode", cp.has_sdk_mode(rec.data))
+        elif rec.op == "notify" and rec.char == PMD_CONTROL_POINT:
+            message = cp.decode_control_point(rec.data)
+            if isinstance(message, cp.StopIndication):
+                timeline.append(Notification(rec.t, rec.char, rec.data))
+            elif message.op == cp.OpCode.GET_SETTINGS and message.measurement not in settings:
+                settings[message.measurement] = message.params
+            elif message.op == cp.OpCode.START and message.measurement not in start_params:
+                start_params[message.measurement] = message.params
+        elif rec.op == "notify" and rec.char in (PMD_DATA, HEART_RATE_MEASUREMENT):
+            timeline.append(Notification(rec.t, rec.char, rec.data))
 
     def recorded_streams(self) -> list[str]:
         """The streams the timeline holds data for (``ecg``, ``acc``, ..., ``hr``, ``rr``)."""
@@ -279,6 +291,8 @@ class FakePolarDevice:
             return True
         if source in self._stalled:
             return False
+        if isinstance(source, int) and source not in KNOWN_MEASUREMENTS:
+            return True  # a recorded notification of a kind no device model knows: passed on as it came
         if isinstance(source, int) and (
             source not in self.active or self._now() < self._quiet_until.get(source, float("-inf"))
         ):

@@ -68,6 +68,30 @@ def test_configuration_errors(args: list[str], option: str) -> None:
     assert len(lines) == 1 and option in lines[0], done.stderr
 
 
+@pytest.mark.parametrize(
+    "case, args, message",
+    [
+        ("other device", ["--device", "Polar OH1"], "'Polar OH1' is not the device of capture"),
+        ("bad control point", [], "c.jsonl:5: control point"),
+        ("header only", [], "holds no notification to replay"),
+    ],
+)
+def test_replay_input_errors(tmp_path: Path, case: str, args: list[str], message: str) -> None:
+    """A capture the replay cannot play as asked: one line naming it, status 2, never a wait or a trace."""
+    lines = CAPTURE.read_text().splitlines()
+    if case == "header only":
+        lines = lines[:1]
+    elif case == "bad control point":
+        lines[4] = json.dumps({"t": 5000.03, "op": "notify", "char": "pmd_cp", "hex": "ff00"})
+    capture = tmp_path / "c.jsonl"
+    capture.write_text("\n".join(lines) + "\n")
+    done = streamer("--replay", str(capture), *args)
+    assert done.returncode == 2, done.stderr
+    own = own_lines(done.stderr)
+    assert len(own) == 1 and message in own[0], done.stderr
+    assert "Traceback" not in done.stderr + done.stdout
+
+
 def test_capture_never_overwrites(tmp_path: Path) -> None:
     existing = tmp_path / "taken.jsonl"
     existing.write_text("keep me\n")

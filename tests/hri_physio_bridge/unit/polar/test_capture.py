@@ -67,20 +67,56 @@ def test_writer_never_overwrites_and_flushes_each_line(tmp_path: Path) -> None:
     "body, problem",
     [
         ('{"t": 1, "op": "notify", "char": "hr", "hex": "10"}', "no header"),
-        ("HEADER\nnot json", "c.jsonl:2: not JSON"),
+        ("HEADER\nnot json\n{}", "c.jsonl:2: not JSON"),
         ('HEADER\n{"t": 1, "op": "notify", "char": "hr"}', "c.jsonl:2: record without 'hex'"),
         ('HEADER\n{"t": "x", "op": "notify", "char": "hr", "hex": ""}', "t must be a number"),
         ('HEADER\n{"t": 1, "op": "push", "char": "hr", "hex": ""}', "op must be one of"),
         ('HEADER\n{"t": 1, "op": "notify", "char": "hr", "hex": "zz"}', "hexadecimal"),
+        ('HEADER\n{"t": Infinity, "op": "notify", "char": "hr", "hex": "10"}',
+         "c.jsonl:2: t must be a finite"),
+        ('HEADER\n{"t": NaN, "op": "notify", "char": "hr", "hex": "10"}', "t must be a finite"),
+        ('HEADER\n{"t": 2, "op": "notify", "char": "hr", "hex": "10"}\n'
+         '{"t": 1, "op": "notify", "char": "hr", "hex": "10"}',
+         "c.jsonl:3: t 1.000000 is before the notification on line 2"),
         ('{"format": "other", "version": 1}', "not a hri_physio.polar.capture"),
     ],
 )
 def test_malformed_capture_files(tmp_path: Path, body: str, problem: str) -> None:
     header = json.dumps({"format": "hri_physio.polar.capture", "version": 1})
     path = tmp_path / "c.jsonl"
-    path.write_text(body.replace("HEADER", header), encoding="utf-8")
+    path.write_text(body.replace("HEADER", header) + "\n", encoding="utf-8")
     with pytest.raises(CaptureError, match=problem):
         read_capture(path)
+
+
+def test_a_last_line_cut_off_is_left_out_with_a_warning(tmp_path: Path) -> None:
+    """A writer stopped in mid-line, or a copy cut short: what came before still replays."""
+    header = json.dumps({"format": "hri_physio.polar.capture", "version": 1})
+    good = '{"t": 1, "op": "notify", "char": "hr", "hex": "1048"}'
+    path = tmp_path / "c.jsonl"
+    path.write_text(f"{header}\n{good}\n{good[:20]}", encoding="utf-8")
+    capture = read_capture(path)
+    assert [r.line for r in capture.records] == [2]
+    assert len(capture.warnings) == 1 and "c.jsonl:3: the last line is cut off" in capture.warnings[0]
+    path.write_text(f"{header}\n{good}\n{good[:20]}\n", encoding="utf-8")
+    assert len(read_capture(path).records) == 1
+    path.write_text(f"{header}\n{good[:20]}\n{good}\n", encoding="utf-8")  # cut in the middle: an error
+    with pytest.raises(CaptureError, match=r"c\.jsonl:2: not JSON"):
+        read_capture(path)
+
+
+def test_reads_and_writes_may_be_stamped_before_a_notification(tmp_path: Path) -> None:
+    """Only notifications are recorded as they arrive; a write's stamp may come before the last one."""
+    header = json.dumps({"format": "hri_physio.polar.capture", "version": 1})
+    path = tmp_path / "c.jsonl"
+    path.write_text(header + "\n" + '{"t": 2, "op": "notify", "char": "hr", "hex": "10"}\n'
+                    '{"t": 1, "op": "write", "char": "pmd_cp", "hex": "01"}\n', encoding="utf-8")
+    assert [r.op for r in read_capture(path).records] == ["notify", "write"]
+
+
+def test_a_folder_is_not_a_capture(tmp_path: Path) -> None:
+    with pytest.raises(CaptureError, match="is a directory, not a capture file"):
+        read_capture(tmp_path)
 
 
 def test_capture_that_is_not_utf8(tmp_path: Path) -> None:

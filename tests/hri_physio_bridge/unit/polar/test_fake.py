@@ -6,7 +6,7 @@ import random
 
 from hri_physio_bridge.polar.encode import encode_heart_rate
 from hri_physio_bridge.polar.fake import FakeClock, FakePolarDevice, Notification
-from hri_physio_bridge.polar.gatt import HEART_RATE_MEASUREMENT
+from hri_physio_bridge.polar.gatt import HEART_RATE_MEASUREMENT, PMD_DATA
 from hri_physio_bridge.polar.virtual_time import run_virtual
 
 HR = encode_heart_rate(70, [900])
@@ -62,3 +62,25 @@ def test_notifications_due_while_the_link_is_down_are_lost() -> None:
 
     seen = run_virtual(play(), clock)
     assert device.delivered + device.lost == 10 and device.lost == 4 and len(seen) == 6
+
+
+def test_a_recorded_notification_of_an_unknown_measurement_is_passed_on() -> None:
+    """A capture holds what the device sent: PMD data of a measurement type no model knows still reaches
+    the client (which counts it as unexpected), while data of a known but unstarted one does not."""
+    clock = FakeClock()
+    unknown = bytes([0x07]) + bytes(9)
+    unstarted_acc = bytes([0x02]) + bytes(9)
+    timeline = [Notification(0.0, PMD_DATA, unknown), Notification(0.5, PMD_DATA, unstarted_acc)]
+    device = FakePolarDevice(timeline=timeline, clock=clock)
+
+    async def play() -> list[bytes]:
+        got: list[bytes] = []
+        client = device.client(lambda: None)
+        await client.connect()
+        await client.start_notify(PMD_DATA, lambda _c, data: got.append(bytes(data)))
+        device.release()
+        await device.wait_finished()
+        return got
+
+    assert run_virtual(play(), clock) == [unknown]
+    assert device.lost == 1
