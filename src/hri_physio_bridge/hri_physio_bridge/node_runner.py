@@ -12,7 +12,9 @@ options as ROS parameters with :meth:`ManagedNode.declare_config`, so ``--ros-ar
 ``--params-file`` come last), spins it on an executor thread and turns SIGINT/SIGTERM into one
 clean shutdown: :meth:`ManagedNode.on_stop`, then :meth:`ManagedNode.run` returns, then
 :meth:`ManagedNode.close`. Any configuration problem, wherever it is found, is one line on
-stderr and exit status 2, never a traceback.
+stderr and exit status 2, never a traceback. A callback that raises (a bug) stops the node the same
+way, after its traceback, and the process ends with status 1 and one line saying so: it never lives
+on with an executor that no longer runs.
 """
 
 from __future__ import annotations
@@ -345,15 +347,29 @@ def run_node(
     node: ManagedNode | None = None
     spinner: ExecutorThread | None = None
     code: int | None = None
+    running: list[ManagedNode] = []
     try:
         try:
             node = make_node(config) if isinstance(make_node, type) else make_node(config, args)
         except (ConfigError, ParameterException, NameValidationException, *startup_errors) as exc:
             return fail(prog, _one_line(exc))
         stop = install_stop_handlers(node.on_stop)
-        spinner = ExecutorThread(node)
+        running.append(node)  # held only while it runs: the node must not outlive this function
+
+        def stop_after_a_failed_callback(_exc: BaseException) -> None:
+            for failed in running:
+                failed.on_stop("a failed callback")  # it stops as after a signal, keeping what it has
+            stop.set()
+
+        spinner = ExecutorThread(node, on_error=stop_after_a_failed_callback)
         code = node.run(stop)
+        if spinner.error is not None:
+            first = (str(spinner.error).strip().splitlines() or [""])[0]
+            print(f"{prog}: error: a callback failed ({type(spinner.error).__name__}: {first}); the node "
+                  "stopped", file=sys.stderr, flush=True)
+            code = 1
     finally:
+        running.clear()
         if node is not None:
             try:
                 node.close()

@@ -10,6 +10,7 @@ import logging
 import sys
 import threading
 import time
+import traceback
 import uuid
 from collections.abc import Callable, Iterable, Iterator
 from typing import Any
@@ -47,9 +48,14 @@ class ExecutorThread:
     message, a timer or :meth:`close` comes: an idle node costs nothing (it used to wake 20 times a
     second to look at a flag, rebuilding its wait set each time). The executor is
     :class:`hri_physio_bridge.executor.LeanExecutor`, which keeps its wait set between wake-ups.
+
+    A callback that raises ends the spin (as in rclpy): its traceback goes to stderr, the exception
+    is kept in :attr:`error` and ``on_error(exception)`` is called, so the owner can stop instead of
+    living on with a node that no longer takes messages.
     """
 
-    def __init__(self, *nodes: Any, context: Any = None) -> None:
+    def __init__(self, *nodes: Any, context: Any = None,
+                 on_error: Callable[[BaseException], None] | None = None) -> None:
         from rclpy.task import Future
 
         from hri_physio_bridge.executor import LeanExecutor
@@ -57,12 +63,24 @@ class ExecutorThread:
         self.executor = LeanExecutor(context=context)
         for node in nodes:
             self.executor.add_node(node)
+        self.error: BaseException | None = None
+        self._on_error = on_error
         self._closed: Any = Future()  # done at close(): ends the spin, waking its wait
-        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread = threading.Thread(target=self._spin, name="executor", daemon=True)
         self._thread.start()
 
     def _spin(self) -> None:
-        self.executor.spin_until_future_complete(self._closed)
+        from rclpy.executors import ExternalShutdownException
+
+        try:
+            self.executor.spin_until_future_complete(self._closed)
+        except ExternalShutdownException:
+            pass  # the context was shut down: the process is ending anyway
+        except Exception as exc:
+            self.error = exc
+            traceback.print_exc(file=sys.stderr)
+            if self._on_error is not None:
+                self._on_error(exc)
 
     def close(self, join_timeout: float = 10.0) -> None:
         """Stop spinning and shut the executor down (the nodes stay for their owner to destroy).

@@ -138,6 +138,52 @@ def test_a_node_that_fails_says_no_done_line(status: str, code: int, tmp_path) -
     assert done.returncode == code and "finished with exit status" not in done.stderr, done.stderr
 
 
+FAILING_CALLBACK_SCRIPT = """
+import sys
+from hri_physio_bridge import node_runner
+from hri_physio_bridge.config import NodeConfig, option
+
+class Options(NodeConfig):
+    fail_after: int = option(3, "the timer call that raises", ge=1)
+
+class Node(node_runner.ManagedNode):
+    def __init__(self, config):
+        super().__init__("failing_callback_test")
+        self.config = self.declare_config(config)
+        self.calls = 0
+        self.create_timer(0.05, self.tick)
+    def tick(self):
+        self.calls += 1
+        if self.calls == self.config.fail_after:
+            raise ZeroDivisionError("the bug in this callback")
+    def on_stop(self, signal_name):
+        print(f"on_stop: {signal_name}", flush=True)
+    def close(self):
+        print(f"closed after {self.calls} calls", flush=True)
+
+sys.exit(node_runner.run_node("failing_callback_test", Options, Node, argv=sys.argv[1:]))
+"""
+
+
+def test_a_callback_that_raises_stops_the_node_with_status_1(tmp_path) -> None:
+    """The spin ends with the exception: the node stops as after a signal (on_stop, run returns,
+    close), says why in one line after the traceback, and exits 1, instead of living on unspun."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "node.py"
+    script.write_text(FAILING_CALLBACK_SCRIPT)
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120,
+                          stdin=subprocess.DEVNULL)
+    assert done.returncode == 1, done.stderr
+    assert "on_stop: a failed callback" in done.stdout and "closed after 3 calls" in done.stdout, done.stdout
+    assert "Traceback" in done.stderr and "ZeroDivisionError: the bug in this callback" in done.stderr
+    errors = [line for line in done.stderr.splitlines() if line.startswith("failing_callback_test: error:")]
+    assert errors == ["failing_callback_test: error: a callback failed (ZeroDivisionError: the bug in this "
+                      "callback); the node stopped"], done.stderr
+    assert "finished with exit status" not in done.stderr
+
+
 def test_the_executor_thread_waits_without_polling_and_close_wakes_it(ros_context: Any) -> None:
     """The spin waits until there is work (no timeout to poll a flag): close() itself ends the wait."""
     import threading
