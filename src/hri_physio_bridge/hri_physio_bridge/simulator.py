@@ -88,7 +88,7 @@ class SimulatorConfig(NodeConfig):
     bnum: int = option(3, "EMG bursts per simulated segment", ge=0)
     bdur: float = option(1.0, "EMG burst duration", unit="s", gt=0)
     resp: float = option(15.0, "breathing rate (RSP)", unit="breaths/min", ge=1, le=60)
-    seed: int = option(42, "random seed (segment k of a continuous run uses seed + k)")
+    seed: int = option(42, "random seed (segment k of a continuous run uses seed + k)", ge=0)
     segment_seconds: float = option(60.0, "continuous or long runs: length of each generated segment",
                                     unit="s", ge=20)
     signals: list[str] = option(list(DEFAULT_SIGNALS),

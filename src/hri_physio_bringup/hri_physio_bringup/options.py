@@ -32,7 +32,7 @@ class SessionConfig(NodeConfig):
                                        "threshold in the packaged coach.yaml)")
     age: float = option(33.0, "the simulated participant's age, also the coach's part_age", unit="years",
                         gt=0, le=120)
-    participant_seed: int = option(1, "seed of the simulated participant's variability")
+    participant_seed: int = option(1, "seed of the simulated participant's variability", ge=0)
     hr_source: Literal["strap", "ecg"] = option("strap", "the coach's heart rate: the strap's HR or the "
                                                 "processor's HR from ECG")
     conf: str = option("", "the coach's YAML file ('' = the packaged coach.yaml)")

@@ -24,6 +24,7 @@ from hri_physio_bridge import topics
 from hri_physio_bridge.config import ConfigError, NodeConfig, option
 from hri_physio_coach.policies.adapter import AdapterOptions
 from hri_physio_coach.policies.registry import POLICY_NAMES
+from hri_physio_coach.zones import tanaka_hr_max
 from qt_controller.commands import GESTURE_SPEED_RANGE
 
 __all__ = ["COACH_NODE", "CoachConfig", "CoachNodeConfig", "ConfigError", "load_config", "participant_id"]
@@ -128,7 +129,7 @@ class CoachConfig(NodeConfig):
                                 "the "
                                 "person online, banded predictions, overshoot guard, alternates two settings "
                                 "across a gap)")
-    seed: int = option(0, "seed of the fuzzy policy's draws and of the random behaviours")
+    seed: int = option(0, "seed of the fuzzy policy's draws and of the random behaviours", ge=0)
     adapt_refractory: bool = option(False, "no adaptation within adapt_refractory_period of the last one")
     adapt_refractory_period: float = option(60.0, "the refractory period", unit="s", ge=0)
     adapt_conditioning_only: bool = option(False, "adapt in the conditioning phase only")
@@ -190,6 +191,10 @@ class CoachConfig(NodeConfig):
             raise ValueError(f"speed_modifier must increase step by step, got {speeds}")
         if self.speed_idx >= len(speeds):
             raise ValueError(f"speed_idx {self.speed_idx} is outside the ladder [0, {len(speeds) - 1}]")
+        hr_max = tanaka_hr_max(self.part_age)
+        if not self.resting_default < hr_max:
+            raise ValueError(f"resting_default {self.resting_default:g} bpm must be below the participant's "
+                             f"HR_max {hr_max:.1f} bpm (208 - 0.7 x part_age {self.part_age:g})")
         if not self.hr_valid_min < self.hr_valid_max:
             raise ValueError(f"need hr_valid_min < hr_valid_max, got {self.hr_valid_min:g}, "
                              f"{self.hr_valid_max:g}")

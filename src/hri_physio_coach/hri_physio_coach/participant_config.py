@@ -59,7 +59,7 @@ class ParticipantNodeConfig(NodeConfig):
                                     "of this period from the coach's session start (0: at once)", unit="s",
                                     ge=0)
     # --- the node and the simulated strap ------------------------------------------------------
-    seed: int = option(0, "seed of the participant's variability")
+    seed: int = option(0, "seed of the participant's variability", ge=0)
     device_id: str = option("SIM0001", "Polar device id in the LSL stream names PolarH10/<id>/<ECG|HR|RR>",
                             min_length=1)
     name_prefix: str = option("", "prefix of the LSL stream names (<prefix>/PolarH10/...)")

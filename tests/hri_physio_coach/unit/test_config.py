@@ -131,6 +131,9 @@ def test_seed_style_file_and_ros_params_file(tmp_path: Path) -> None:
         ({"audio_exercise_base": "exercise"}, "audio_exercise_base must contain"),
         ({"adapt_warmup_max_speedups": -5}, "adapt_warmup_max_speedups: expected greater than or equal"),
         ({"max_invalid_fraction": 1.5}, "max_invalid_fraction: expected less than or equal to 1"),
+        ({"seed": -1}, "seed: expected greater than or equal to 0"),
+        ({"part_age": 90, "resting_default": 150},
+         r"resting_default 150 bpm must be below the participant's HR_max 145\.0 bpm"),
     ],
 )
 def test_invalid_configuration(values: dict, match: str) -> None:
@@ -222,6 +225,7 @@ def test_participant_options_cover_the_model_with_its_defaults() -> None:
         ({"update_period": 0}, "update_period: expected greater than 0"),
         ({"device_id": ""}, "device_id: String should have at least 1 character"),
         ({"seed": 1.5}, "seed: expected a valid integer"),
+        ({"seed": -1}, "seed: expected greater than or equal to 0"),
     ],
 )
 def test_invalid_participant_options(values: dict, match: str) -> None:

@@ -31,6 +31,7 @@ from hri_physio_coach.evaluate.cohort import PopulationError
 from hri_physio_coach.evaluate.config import EvaluateConfig
 from hri_physio_coach.evaluate.evaluation import (
     base_coach_options,
+    check_coach_for_people,
     cohort_of,
     headline,
     prepare_out,
@@ -57,6 +58,7 @@ def main(argv: list[str] | None = None) -> int:
         cfg = EvaluateConfig.from_mapping(values, args.conf or "options")
         base = base_coach_options(cfg)
         people = cohort_of(cfg)
+        check_coach_for_people(people, base)
         out = prepare_out(cfg.out)
     except (ConfigError, PopulationError) as exc:
         print(f"{PROG}: error: {exc}", file=sys.stderr)

@@ -16,7 +16,7 @@ class EvaluateConfig(NodeConfig):
 
     cohort: int = option(200, "people in the simulated cohort", ge=1)
     seed: int = option(1, "seed of the cohort and of every random draw of its sessions (paired across "
-                       "policies)")
+                       "policies)", ge=0)
     policies: list[str] = option(DEFAULT_POLICIES, "policies to compare, comma-separated "
                                  f"({', '.join(POLICY_NAMES)})", min_length=1)
     out: str = option("evaluation", "output directory (created if needed; its result files are replaced)",

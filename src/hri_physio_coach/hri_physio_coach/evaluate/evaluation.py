@@ -58,6 +58,13 @@ def base_coach_options(cfg: EvaluateConfig) -> dict[str, Any] | None:
     return CoachConfig.from_file(cfg.coach_conf, COACH_NODE).as_dict()
 
 
+def check_coach_for_people(people: list[ParticipantParams], base: dict[str, Any] | None) -> None:
+    """Each session's coach takes the base options with its person's age: a rule between the two (the
+    resting_default below that person's HR_max) fails here, naming the person, before any work."""
+    for age in sorted({float(p.age) for p in people}):
+        CoachConfig.from_mapping({**(base or {}), "part_age": age}, f"the coach for a person aged {age:g}")
+
+
 def cohort_of(cfg: EvaluateConfig) -> list[ParticipantParams]:
     return make_cohort(cfg.cohort, cfg.seed, (cfg.age_min, cfg.age_max), cfg.population or None, cfg.model)
 

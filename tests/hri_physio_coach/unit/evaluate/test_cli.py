@@ -59,6 +59,7 @@ def test_a_population_file_replaces_the_sampled_cohort(tmp_path: Path) -> None:
     (["--policies", "threshold,threshold"], "policies"),
     (["--cohort", "0"], "cohort"),
     (["--cohort", "-5"], "cohort"),
+    (["--seed", "-1"], "seed: expected greater than or equal to 0"),
     (["--age-min", "60", "--age-max", "50"], "age_min"),
     (["--hr-latency", "abc"], "hr_latency"),
     (["--coach-conf", "/nonexistent/coach.yaml"], "coach.yaml"),
@@ -66,6 +67,17 @@ def test_a_population_file_replaces_the_sampled_cohort(tmp_path: Path) -> None:
 def test_bad_options(args: list[str], names: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main([*args, "--out", str(tmp_path / "x")]) == 2
     assert names in error_line(capsys)
+    assert not (tmp_path / "x" / "sessions.csv").exists()
+
+
+def test_a_coach_option_that_does_not_fit_a_person_of_the_cohort(tmp_path: Path,
+                                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """The coach's options are checked with each person's age before any session runs."""
+    conf = tmp_path / "coach.yaml"
+    conf.write_text("calib_skip: true\nresting_default: 150\n")
+    args = ["--cohort", "2", "--age-min", "85", "--age-max", "95", "--coach-conf", str(conf)]
+    assert main([*args, "--out", str(tmp_path / "x")]) == 2
+    assert "resting_default 150 bpm must be below the participant's HR_max" in error_line(capsys)
     assert not (tmp_path / "x" / "sessions.csv").exists()
 
 
