@@ -144,6 +144,7 @@ class ReceiverStats:
     published_frames: int = 0
     logged_samples: int = 0
     nonfinite_samples: int = 0
+    bad_timestamp_samples: int = 0  # samples dropped because their timestamp was NaN or infinite
     rejected_chunks: int = 0
     publish_errors: int = 0
     gaps: list[Gap] = field(default_factory=list)
@@ -166,6 +167,7 @@ class ReceiverStats:
             "published_frames": self.published_frames,
             "logged_samples": self.logged_samples,
             "nonfinite_samples": self.nonfinite_samples,
+            "bad_timestamp_samples": self.bad_timestamp_samples,
             "rejected_chunks": self.rejected_chunks,
             "publish_errors": self.publish_errors,
             "gaps": len(self.gaps),
@@ -484,6 +486,11 @@ class PhysioReceiver:
         if self._writer is not None:
             self._writer.write(chunk)
             self.stats.logged_samples += chunk.num_samples
+        finite = np.isfinite(chunk.timestamps)
+        if not finite.all():
+            chunk = self._drop_bad_timestamps(chunk, finite)
+            if chunk.num_samples == 0:
+                return
         self._check_values(chunk)
         self._check_continuity(chunk)
         self._check_rate()
@@ -496,6 +503,21 @@ class PhysioReceiver:
         except BufferClosed:
             if not self._stop.is_set():
                 raise
+
+    def _drop_bad_timestamps(self, chunk: Frame, finite: np.ndarray) -> Frame:
+        """A sample whose timestamp is NaN or infinite has no place in time: it is dropped, counted
+        and said (rate-limited), and the chunk's other samples go on."""
+        bad = int((~finite).sum())
+        self.stats.bad_timestamp_samples += bad
+        good = chunk.timestamps[finite]
+        near = f" (in a chunk from t={good[0]:.4f})" if good.size else ""
+        self._rejections.report(
+            "timestamps",
+            f"{self.source.uri}: {bad} sample(s) with a NaN or infinite timestamp dropped{near}",
+            "sample(s) dropped for a NaN or infinite timestamp",
+            count=bad,
+        )
+        return Frame(good, chunk.values[finite], chunk.channels)
 
     def _check_values(self, chunk: Frame) -> None:
         if chunk.is_string or chunk.values.dtype.kind != "f":

@@ -93,6 +93,7 @@ class ProcessorStats:
     missing_samples: int = 0  # estimated, in the gaps
     clock_jumps: int = 0  # duplicate or backward time steps
     discarded_samples: int = 0
+    bad_timestamp_samples: int = 0  # dropped: their timestamp was NaN or infinite
     samples_in: int = 0
 
     def as_dict(self) -> dict[str, int]:
@@ -151,8 +152,13 @@ class NeurokitProcessor:
                 f"input frame has {frame.num_channels} channel(s); channel {self.cfg.channel} was asked for"
             )
         self.stats.samples_in += frame.num_samples
+        t = frame.timestamps
         values = np.asarray(frame.values[:, self.cfg.channel], dtype=np.float64)
-        return self._handle(self.acc.push(frame.timestamps, values))
+        finite = np.isfinite(t)
+        if finite.all():
+            return self._handle(self.acc.push(t, values))
+        out = self._drop_bad_timestamps(t, finite)
+        return out + self._handle(self.acc.push(t[finite], values[finite]))
 
     def finish(self) -> list[Output]:
         """The input ended: process what is left and report anything pending."""
@@ -196,6 +202,19 @@ class NeurokitProcessor:
         out.extend(self._maybe_report(t_after))
         return out
 
+    def _drop_bad_timestamps(self, t: np.ndarray, finite: np.ndarray) -> list[Output]:
+        """Samples whose timestamp is NaN or infinite have no place in a window: dropped, counted, and
+        reported with the discontinuities (at the nearest good time; before any, only counted)."""
+        bad = int((~finite).sum())
+        self.stats.bad_timestamp_samples += bad
+        good = t[finite]
+        near = float(good[0]) if good.size else self.acc.last_timestamp
+        if near is None:
+            return []
+        self._note(self._pending, near, near,
+                   f"{bad} sample(s) with a NaN or infinite timestamp near {near:.6f}")
+        return self._maybe_report(near)
+
     @staticmethod
     def _note(p: _Pending, t0: float, t1: float, example: str) -> None:
         if math.isnan(p.t_first):
@@ -215,7 +234,8 @@ class NeurokitProcessor:
         gaps, missing = now.gaps - p.reported.gaps, now.missing_samples - p.reported.missing_samples
         backward = now.clock_jumps - p.reported.clock_jumps
         discarded = now.discarded_samples - p.reported.discarded_samples
-        if not (gaps or backward or discarded):
+        bad_times = now.bad_timestamp_samples - p.reported.bad_timestamp_samples
+        if not (gaps or backward or discarded or bad_times) or math.isnan(p.t_last):
             return []
         self._last_event_t = p.t_last
         reasons = []
@@ -231,13 +251,16 @@ class NeurokitProcessor:
                 f"{discarded} sample(s) not processed: their stretch between discontinuities is shorter "
                 f"than min_window_seconds ({self.cfg.min_window_seconds:g} s)"
             )
+        if bad_times:
+            reasons.append(f"{bad_times} sample(s) dropped: their timestamp is NaN or infinite")
         if cuts >= 10 and discarded:
             reasons.append("timestamps keep jumping: is sampling_rate "
                            f"({self.fs:g} Hz) right for this stream?")
         payload = {
             "t": p.t_last, "event": "discontinuity", "mode": self.cfg.mode, "ok": False,
             "gaps": gaps, "missing_samples": missing, "backward_steps": backward,
-            "discarded_samples": discarded, "t_first": p.t_first, "t_last": p.t_last,
+            "discarded_samples": discarded, "bad_timestamp_samples": bad_times,
+            "t_first": p.t_first, "t_last": p.t_last,
             "examples": p.examples, "reason": "; ".join(reasons),
         }
         self._pending = _Pending(replace(now))

@@ -124,6 +124,11 @@ class WindowAccumulator:
     def buffered(self) -> int:
         return int(self._t.shape[0])
 
+    @property
+    def last_timestamp(self) -> float | None:
+        """The newest timestamp pushed (None before the first)."""
+        return self._last_t
+
     def push(self, timestamps: np.ndarray, values: np.ndarray) -> list[Event]:
         """Add a chunk; return the windows (and gaps) it completes, in stream order."""
         t = np.asarray(timestamps, dtype=np.float64).reshape(-1)

@@ -291,6 +291,27 @@ def test_nonfinite_samples_are_counted_and_forwarded(caplog: pytest.LogCaptureFi
     assert np.isnan(sink.frames[0].values[1, 0])
 
 
+def test_samples_with_a_nan_or_infinite_timestamp_are_dropped_and_the_rest_goes_on(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """Such a sample has no place in time (and stopped the receiver, and a processor downstream): it is
+    dropped, counted and said; the chunk's other samples and the chunks after it are published."""
+    rx, src, sink = make()
+    bad = chunk(4, 4)
+    bad.timestamps[1] = np.inf
+    bad.timestamps[2] = np.nan
+    all_bad = chunk(8, 4)
+    all_bad.timestamps[:] = -np.inf
+    with caplog.at_level(logging.ERROR, logger="test"):
+        run_to_end(rx, src, [chunk(0, 4), bad, all_bad, chunk(12, 8)])
+    assert rx.fatal is None
+    assert rx.stats.bad_timestamp_samples == 6 and rx.stats.as_dict()["bad_timestamp_samples"] == 6
+    published = np.concatenate([f.timestamps for f in sink.frames])
+    expected = np.array([0, 1, 2, 3, 4, 7, 12, 13, 14, 15, 16, 17, 18, 19]) / 100.0
+    assert np.isfinite(published).all() and np.allclose(published[:len(expected)], expected)
+    assert rx.stats.published_samples == 14
+    assert "2 sample(s) with a NaN or infinite timestamp dropped (in a chunk from t=0.0400)" in caplog.text
+
+
 def test_publish_errors_are_counted_not_fatal() -> None:
     rx, src, _ = make()
     rx.sink = sink = MemorySink(fail_first=1)

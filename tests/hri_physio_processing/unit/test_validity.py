@@ -142,6 +142,25 @@ def test_backward_clock_jump_restarts_windows_but_is_not_a_gap(mitdb) -> None:
     np.testing.assert_array_equal(clean_t, t)  # every sample still published once
 
 
+def test_samples_with_a_nan_or_infinite_timestamp_are_dropped_and_reported(mitdb) -> None:
+    """They crashed the node (a NaN in its JSON status, an infinite gap length): now dropped, counted,
+    reported with the discontinuities, and the windows go on from the good samples around them."""
+    n = 70 * FS
+    t = np.arange(n) / FS
+    t[30 * FS] = np.nan
+    t[30 * FS + 1] = np.inf
+    proc, out = _run(mitdb.x[:n], t)
+    assert proc.stats.bad_timestamp_samples == 2
+    reports = statuses(out, "discontinuity")
+    assert sum(r["bad_timestamp_samples"] for r in reports) == 2
+    assert any("2 sample(s) dropped: their timestamp is NaN or infinite" in r["reason"] for r in reports)
+    assert all(math.isfinite(r["t"]) for r in reports)
+    clean_t = np.concatenate([f.timestamps for f in frames_of(out, "clean")])
+    assert np.isfinite(clean_t).all() and clean_t.size == n - 2
+    ends = [st["window"]["t_end"] for st in statuses(out)]
+    assert min(ends) < 30 < max(ends)  # windows on both sides of the dropped samples (a gap between)
+
+
 def test_wrong_sampling_rate_is_flagged(mitdb) -> None:
     x = mitdb.x[: 40 * FS]
     t = np.arange(x.shape[0]) / 100.0  # really 100 Hz timestamps, configured 130 Hz
