@@ -184,13 +184,13 @@ def _adaptations(timeline: Timeline) -> dict[str, Any]:
         row = per_phase.setdefault(phase, {"rule_updates": 0, "adaptations": 0,
                                            **dict.fromkeys(RuleOutcome, 0)})
         row["rule_updates"] += 1
-        row["adaptations"] += int(u.delta != 0)
+        row["adaptations"] += int(u.changed)  # a ladder step or a change of activity
         row[u.outcome] += 1
     actions = Counter(u.action for u in timeline.rule_updates)
     # What the coach said about the zone itself: out of reach, or a gap bridged by alternating two settings.
     notices = [{"t": e.get("t"), "event": e.get("event"), "reason": e.get("reason")} for e in timeline.events
                if e.get("event") in ("zone_out_of_reach", "zone_gap")]
-    return {"total": sum(int(u.delta != 0) for u in timeline.rule_updates),
+    return {"total": sum(int(u.changed) for u in timeline.rule_updates),
             "rule_updates": len(timeline.rule_updates), "per_phase": per_phase, "actions": dict(actions),
             "zone_notices": notices}
 

@@ -87,6 +87,8 @@ class RuleUpdate:
     p: float | None
     draw: float | None
     reason: str
+    #: The decision changed the setting: a ladder step (delta) or the activity (the coach's ``changed``).
+    changed: bool = False
 
 
 @dataclass(frozen=True)
@@ -218,7 +220,7 @@ def build_timeline(tables: BagTables, events_topic: str, state_topic: str,
         updates.append(RuleUpdate(
             float(ev["t"]), inputs.get("phase"), inputs.get("phase_kind"), str(d.get("action", "")),
             outcome_of(d), int(d.get("delta") or 0), hr, _num(d.get("p")), _num(d.get("draw")),
-            str(d.get("reason", ""))))
+            str(d.get("reason", "")), bool(d.get("changed", int(d.get("delta") or 0) != 0))))
 
     policy = next((str(u.get("decision", {}).get("policy")) for u in by_kind.get("rule_update", [])
                    if u.get("decision", {}).get("policy")), None)

@@ -76,6 +76,7 @@ def session(*, clock: bool = True, stop_at: float | None = None, policy: str = "
                (60, "warm_up", "encourage", 0, 130.0, 0.5, 0.7),
                (90, "conditioning", "gated", 0, None, None, None),
                (100, "conditioning", "slow_down", -1, 150.0, 0.95, 0.2),
+               (120, "conditioning", "change_activity", 0, 140.0, 0.8, 0.4),  # no ladder step, a change
                (150, "cool_down", "at_limit", 0, 118.0, 1.0, 0.3)]
     speed, tempo = 1.0, 120.0
     for t, phase, action, delta, hr, p, draw in updates:
@@ -86,7 +87,8 @@ def session(*, clock: bool = True, stop_at: float | None = None, policy: str = "
                      "inputs": {"hr_mean": hr, "phase": phase, "phase_kind": phase},
                      "decision": {"t": to_sim(t), "policy": policy, "action": action, "delta": delta,
                                   "proposed": delta, "reason": "no heart-rate data for 12 s" if hr is None
-                                  else f"HR {hr:.1f}", "hr": hr, "p": p, "draw": draw, "changed": delta != 0},
+                                  else f"HR {hr:.1f}", "hr": hr, "p": p, "draw": draw,
+                                  "changed": delta != 0 or action == "change_activity"},
                      "ladder": {"index": 2 + delta, "speed": speed, "tempo": tempo}})
     for t, kind in ((45, "motivation"), (75, "emotion"), (110, "motivation")):
         if t < end:
@@ -147,7 +149,9 @@ def test_in_zone_fractions_and_seconds_above_by_construction(full) -> None:
 def test_adaptations_behaviours_and_signal_quality(full) -> None:
     r = full.report
     per = r["adaptations"]["per_phase"]
-    assert r["adaptations"]["total"] == 2 and r["adaptations"]["rule_updates"] == 5
+    # An adaptation is a decision that changed the setting: a ladder step, or (here) the activity.
+    assert r["adaptations"]["total"] == 3 and r["adaptations"]["rule_updates"] == 6
+    assert per["conditioning"]["adaptations"] == 2 and r["adaptations"]["actions"]["change_activity"] == 1
     assert per["warm_up"]["speed up"] == 1 and per["warm_up"]["no change"] == 1
     assert per["conditioning"]["slow down"] == 1 and per["conditioning"]["no update (no HR)"] == 1
     assert per["cool_down"]["no change"] == 1
