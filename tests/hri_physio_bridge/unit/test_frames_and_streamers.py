@@ -293,7 +293,34 @@ def test_csv_replay_paces_by_timestamps(tmp_path: Path) -> None:
 
     s = CsvStreamer(f"{path}?rate=2", max_chunk=1, monotonic=lambda: now[0], sleep=sleep)
     s.open_input()
-    while s.receive() is not None:
-        pass
+    while not s.exhausted:
+        s.receive(timeout=1.0)
     # 0.5 s of recording per row at 2x speed = 0.25 s per row, after the first.
     assert sleeps == pytest.approx([0.25] * 4)
+
+
+def test_csv_replay_waits_for_a_row_at_most_the_timeout_and_never_holds_due_rows(tmp_path: Path) -> None:
+    """A 60 s gap in the stamps: the rows before it go out when due, and each call waits at most its
+    timeout for the row after it (a stop is never held up by the gap)."""
+    path = tmp_path / "p.csv"
+    rows = [10.0, 10.5, 11.0, 71.0, 71.5]
+    path.write_text("t,a\n" + "".join(f"{t},{i}\n" for i, t in enumerate(rows)))
+    now = [0.0]
+
+    def sleep(dt: float) -> None:
+        assert dt <= 0.1 + 1e-9
+        now[0] += dt
+
+    s = CsvStreamer(f"{path}?rate=1", max_chunk=32, monotonic=lambda: now[0], sleep=sleep)
+    s.open_input()
+    got: list[tuple[float, float]] = []  # (stamp, when it came out)
+    calls = 0
+    while not s.exhausted:
+        calls += 1
+        frame = s.receive(timeout=0.1)
+        if frame is not None:
+            got += [(t, now[0]) for t in frame.timestamps]
+    assert [t for t, _ in got] == rows
+    for t, when in got:
+        assert when == pytest.approx(t - 10.0, abs=1e-6)  # each row when it is due, not later
+    assert calls > 600  # the gap was waited out in calls of 0.1 s

@@ -147,6 +147,7 @@ class CsvStreamer(Streamer):
         self._writer: CsvWriter | None = None
         self._t0: tuple[float, float] | None = None  # (first source t, wall start)
         self._error: StreamMismatchError | None = None  # found after good rows: raised on the next call
+        self._held: tuple[float, list] | None = None  # a row read but not yet due
         self.exhausted = False
 
     # -- input ---------------------------------------------------------------
@@ -194,31 +195,42 @@ class CsvStreamer(Streamer):
         self.exhausted = False
         self._t0 = None
         self._error = None
+        self._held = None
         return spec
 
     def receive(self, timeout: float = 0.1) -> Frame | None:
-        """The next rows (up to ``max_chunk``). A bad row is an error naming its line, raised once
-        the good rows before it have been returned."""
+        """The next rows (up to ``max_chunk``) that are due at the replay ``rate``. A bad row is an
+        error naming its line, raised once the good rows before it have been returned.
+
+        A row not yet due is waited for at most ``timeout`` (None: not yet, and the row is kept for
+        the next call), so a stop never waits out a long gap in the timestamps, and the rows before a
+        gap go out when they are due, not with the first row after it.
+        """
         if self._reader is None or self._lines is None or self.spec is None:
             raise StreamerError(f"{self.uri} is not open as an input")
-        if self._error is not None:
+        if self._error is not None and self._held is None:
             raise self._error
+        deadline = self._monotonic() + max(timeout, 0.0)
         stamps: list[float] = []
         values: list[list[float]] | list[list[str]] = []
-        try:
-            for row in self._reader:
-                if not row:
-                    continue
-                stamp, value = self._parse(row, self._lines.number)
-                stamps.append(stamp)
-                values.append(value)
-                if len(stamps) >= self.max_chunk:
+        while len(stamps) < self.max_chunk:
+            row = self._next_row()
+            if row is None:
+                break
+            wait = self._until_due(row[0])
+            if wait > 0:
+                left = deadline - self._monotonic()
+                if stamps or wait > left:
+                    if not stamps and left > 0:
+                        self._sleep(left)
+                    self._held = row
                     break
-        except StreamMismatchError as exc:
-            self._error = exc
-        except csv.Error as exc:
-            self._error = StreamMismatchError(f"{self.path}:{self._lines.number}: {exc}")
+                self._sleep(wait)
+            stamps.append(row[0])
+            values.append(row[1])
         if not stamps:
+            if self._held is not None:
+                return None  # the next row is not due yet
             if self._error is not None:
                 raise self._error
             self.exhausted = True
@@ -227,9 +239,26 @@ class CsvStreamer(Streamer):
             array = np.array(values, dtype=object)
         else:
             array = np.array(values, dtype=np.float64).astype(self._np_dtype)
-        t = np.array(stamps, dtype=np.float64)
-        self._pace(t[-1], timeout)
-        return Frame(t, array, self.spec.channels)
+        return Frame(np.array(stamps, dtype=np.float64), array, self.spec.channels)
+
+    def _next_row(self) -> tuple[float, list] | None:
+        """The row held back from the last call, else the next good row; None at the end or at a bad
+        row (kept in ``_error`` for after the rows before it)."""
+        assert self._reader is not None and self._lines is not None
+        if self._held is not None:
+            row, self._held = self._held, None
+            return row
+        if self._error is not None:
+            return None
+        try:
+            for fields in self._reader:
+                if fields:
+                    return self._parse(fields, self._lines.number)
+        except StreamMismatchError as exc:
+            self._error = exc
+        except csv.Error as exc:
+            self._error = StreamMismatchError(f"{self.path}:{self._lines.number}: {exc}")
+        return None
 
     def _parse(self, row: list[str], line: int) -> tuple[float, list]:
         assert self.spec is not None
@@ -245,17 +274,17 @@ class CsvStreamer(Streamer):
         except ValueError as exc:
             raise StreamMismatchError(f"{self.path}:{line}: not a number ({exc})") from None
 
-    def _pace(self, t_source: float, timeout: float) -> None:
-        """Hold the chunk back until its last sample is due at the replay rate."""
-        if self.rate == 0:
-            return
+    def _until_due(self, t_source: float) -> float:
+        """Seconds until a row stamped ``t_source`` is due at the replay rate (<= 0: due now). The
+        first row sets the start; a row whose stamp is not finite is due at once (the receiver
+        drops it)."""
+        if self.rate == 0 or not math.isfinite(t_source):
+            return 0.0
         now = self._monotonic()
         if self._t0 is None:
             self._t0 = (t_source, now)
-            return
-        due = self._t0[1] + (t_source - self._t0[0]) / self.rate
-        if due > now:
-            self._sleep(due - now)
+            return 0.0
+        return self._t0[1] + (t_source - self._t0[0]) / self.rate - now
 
     # -- output --------------------------------------------------------------
     def open_output(self, spec: StreamSpec) -> None:
