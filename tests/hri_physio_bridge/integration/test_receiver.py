@@ -428,6 +428,24 @@ def test_bad_configuration_one_clear_message(tmp_path: Path, conf_text: str, arg
     assert message in lines[0], rx.output
 
 
+@pytest.mark.parametrize("case", ["topic", "log_file"])
+def test_an_output_that_cannot_be_opened_is_one_error_line(tmp_path: Path, case: str) -> None:
+    """Found only when the streams open (after start-up): a bad topic name, a log file under a file."""
+    src = tmp_path / "in.csv"
+    src.write_text("t,v\n" + "".join(f"{100 + i / RATE!r},{i}\n" for i in range(10)))
+    (tmp_path / "a_file").write_text("not a folder")
+    args = (["--output", "ros:/bad topic"] if case == "topic" else
+            ["--output", f"csv:{tmp_path / 'out.csv'}", "--log-data", "true",
+             "--log-name", str(tmp_path / "a_file" / "log.csv")])
+    with NodeProcess("physio_receiver", "--input", f"csv:{src}?rate=0", *args) as rx:
+        code = rx.wait(60)
+    assert code == 2, rx.output
+    errors = [line for line in rx.output.splitlines() if line.startswith("physio_receiver: error:")]
+    assert len(errors) == 1 and "cannot open" in errors[0], rx.output
+    assert ("Invalid topic name" if case == "topic" else "a_file") in errors[0], rx.output
+    assert "Traceback" not in rx.output
+
+
 def test_broken_params_file_is_one_line(tmp_path: Path) -> None:
     params = tmp_path / "params.yaml"
     params.write_text("physio_receiver:\n  ros__parameters:\n    output_frame: [4\n")
