@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from typing import ClassVar
 
 import numpy as np
@@ -71,15 +71,29 @@ class ParticipantParams:
 
     def validate(self) -> None:
         problems = []
+        for f in fields(self):  # every number finite (a NaN or inf ran as a NaN heart rate, or crashed)
+            value = getattr(self, f.name)
+            if isinstance(value, int | float) and not isinstance(value, bool) and not math.isfinite(value):
+                problems.append(f"{f.name} must be a finite number, got {value}")
+            elif f.name.startswith("tau") and isinstance(value, int | float) and value <= 0:
+                problems.append(f"{f.name} must be > 0 s, got {value}")
+        if problems:
+            raise ValueError("invalid participant: " + "; ".join(problems))
+        if self.step_height <= 0:
+            problems.append(f"step_height must be > 0 m, got {self.step_height}")
+        if self.marching_mets < 1:
+            problems.append(f"marching_mets must be >= 1 (rest is 1 MET), got {self.marching_mets}")
+        for name in ("arm_work", "gesture_gain", "drift_amplitude", "sdnn_rest"):
+            if getattr(self, name) < 0:
+                problems.append(f"{name} must be >= 0, got {getattr(self, name)}")
+        if not 0 <= self.artefact_rate <= 1:
+            problems.append(f"artefact_rate must be in [0, 1], got {self.artefact_rate}")
         if not 0 < self.age <= 120:
             problems.append(f"age must be in (0, 120], got {self.age}")
         if not 30 <= self.hr_rest < self.hr_max_true:
             problems.append(f"need 30 <= hr_rest < hr_max_true, got {self.hr_rest} / {self.hr_max_true}")
         if self.vo2max <= REST_VO2:
             problems.append(f"vo2max must exceed {REST_VO2} ml/kg/min, got {self.vo2max}")
-        for name in ("tau_fast", "tau_on", "tau_off", "tau_drift"):
-            if getattr(self, name) <= 0:
-                problems.append(f"{name} must be > 0 s")
         if self.dead_time < 0:
             problems.append("dead_time must be >= 0 s")
         if not 0 <= self.reaction_period < math.inf:

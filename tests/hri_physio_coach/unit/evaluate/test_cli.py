@@ -97,6 +97,11 @@ def test_unwritable_out_dir(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     ("age,hr_rest\n30,\n", "needs a value"),
     ("age,hr_rest,hr_max_true\n30,200,180\n", "hr_rest < hr_max_true"),
     ("age\n30\n", "fewer than the cohort"),
+    ("age,tau_on\n30,nan\n30,60\n", "line 2: invalid participant: tau_on must be a finite number, got nan"),
+    ("age,dead_time\n30,8\n30,inf\n", "line 3: invalid participant: dead_time must be a finite number"),
+    ("age,marching_mets\n30,-5\n30,3\n", "marching_mets must be >= 1"),
+    ("age,artefact_rate\n30,7\n30,0\n", "artefact_rate must be in [0, 1]"),
+    ("age,step_height\n30,0\n30,0.1\n", "step_height must be > 0 m"),
 ])
 def test_bad_population_file(content: str | None, names: str, tmp_path: Path,
                              capsys: pytest.CaptureFixture[str]) -> None:
