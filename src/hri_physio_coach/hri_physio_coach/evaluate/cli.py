@@ -69,6 +69,10 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:  # e.g. the scheduler cannot be reached, the disk filled up
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        print(f"\n{PROG}: interrupted before the evaluation finished: the files in {out} are not a "
+              "complete result of this run", file=sys.stderr)
+        return 130
     print(headline(evaluation))
     return 0
 

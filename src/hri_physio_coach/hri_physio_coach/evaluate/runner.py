@@ -82,13 +82,17 @@ def _local(chunks: list[list[Task]], base: dict[str, Any] | None, jobs: int) -> 
         for i, chunk in enumerate(chunks):
             yield i, run_chunk(chunk, base)
         return
-    with ProcessPoolExecutor(max_workers=jobs) as pool:
+    pool = ProcessPoolExecutor(max_workers=jobs)
+    try:
         pending: dict[Future[list[Result]], int] = {pool.submit(run_chunk, c, base): i
                                                     for i, c in enumerate(chunks)}
         while pending:
             done, _ = wait(pending, return_when=FIRST_COMPLETED)
             for future in done:
                 yield pending.pop(future), future.result()
+    finally:
+        # Ended early (Ctrl-C, an error): the chunks not started are dropped, not run to the end first.
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _dask(chunks: list[list[Task]], base: dict[str, Any] | None, scheduler: Any) -> Done:

@@ -135,3 +135,35 @@ def test_the_sensitivity_sweep_moves_each_assumption_to_both_ends(tmp_path: Path
     swept = pd.read_csv(out / "sensitivity_sessions.csv")
     assert len(swept) == 18 * 2 and set(swept.loc[swept.variant == "gesture_gain=0.5", "participant"]) == {0}
     assert "## Sensitivity" in (out / "summary.md").read_text()
+
+
+def test_ctrl_c_is_one_line_and_status_130(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    from hri_physio_coach.evaluate import cli
+
+    def interrupted(*_args: object, **_kwargs: object) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "run_evaluation", interrupted)
+    assert main(["--cohort", "1", "--out", str(tmp_path / "x")]) == 130
+    assert "interrupted before the evaluation finished" in capsys.readouterr().err
+
+
+def test_an_evaluation_ended_early_drops_the_chunks_not_started(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Ctrl-C (or an error) while local workers run: the pool is shut down with its queued chunks
+    cancelled, not after running every one of them."""
+    from hri_physio_coach.evaluate import runner
+
+    shutdowns: list[dict[str, bool]] = []
+
+    class Pool(runner.ProcessPoolExecutor):  # type: ignore[misc]
+        def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+            shutdowns.append({"wait": wait, "cancel_futures": cancel_futures})
+            super().shutdown(wait=wait, cancel_futures=cancel_futures)
+
+    monkeypatch.setattr(runner, "ProcessPoolExecutor", Pool)
+    chunks = [[] for _ in range(20)]  # empty chunks: each worker call returns at once
+    done = runner._local(chunks, None, 2)
+    next(done)
+    done.close()  # what a KeyboardInterrupt in the loop over results does to the generator
+    assert shutdowns and shutdowns[0]["cancel_futures"]
