@@ -24,7 +24,9 @@ import queue
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal, TypeVar
+from typing import Annotated, Literal, TypeVar
+
+from pydantic import AfterValidator
 
 T = TypeVar("T")
 
@@ -83,6 +85,18 @@ def parse_tempo(text: str, what: str) -> float:
     if not TEMPO_MIN <= bpm <= TEMPO_MAX:  # also refuses nan
         raise RequestError(f"{what}: tempo {bpm:g} BPM is outside {TEMPO_MIN:g}-{TEMPO_MAX:g} BPM")
     return bpm
+
+
+def existing_media_dir(value: str) -> str:
+    """A ``media_dir`` option: empty (the working directory) or a directory that exists."""
+    if value and not Path(value).expanduser().is_dir():
+        what = "is not a directory" if Path(value).expanduser().exists() else "does not exist"
+        raise ValueError(f"media directory {value} {what}")
+    return value
+
+
+#: The ``media_dir`` option of the streamers: an existing directory, or empty (the working directory).
+MediaDir = Annotated[str, AfterValidator(existing_media_dir)]
 
 
 def _media_path(text: str, media_dir: Path | None, what: str) -> Path:

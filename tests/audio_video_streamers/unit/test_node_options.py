@@ -25,6 +25,9 @@ from hri_physio_bridge.config import ConfigError
         (video_streamer.main, ["--preview-rate", "-1"], "preview_rate"),
         (video_streamer.main, ["--tempo", "20"], "tempo"),
         (video_streamer.main, ["--initial", ""], "initial"),
+        (audio_streamer.main, ["--media-dir", "/nonexistent/music"],
+         "media directory /nonexistent/music does not exist"),
+        (video_streamer.main, ["--media-dir", __file__], "is not a directory"),
     ],
 )
 def test_bad_options_are_one_line_and_status_2(main, args: list[str], fragment: str,

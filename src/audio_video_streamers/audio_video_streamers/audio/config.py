@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Literal
 
+from audio_video_streamers.requests import MediaDir
 from hri_physio_bridge.config import NodeConfig, option
 
 
@@ -24,7 +25,7 @@ class AudioStreamerConfig(NodeConfig):
     block: int = option(1024, "frames rendered per block", ge=64, le=16384)
     latency: float = option(0.1, "how far playback runs ahead of the clock (device buffer, null sink "
                             "lead)", unit="s", gt=0.0, le=2.0)
-    media_dir: str = option("", "directory for relative file names in requests (empty = the working "
+    media_dir: MediaDir = option("", "directory for relative file names in requests (empty = the working "
                             "directory)")
     cache_dir: str = option("~/.cache/hri_physio/stretch", "where time-stretched tracks are kept between "
                             "runs (empty = memory only)")

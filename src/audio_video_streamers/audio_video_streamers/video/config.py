@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from audio_video_streamers.requests import TEMPO_MAX, TEMPO_MIN
+from audio_video_streamers.requests import TEMPO_MAX, TEMPO_MIN, MediaDir
 from hri_physio_bridge.config import NodeConfig, option
 
 
@@ -25,7 +25,7 @@ class VideoStreamerConfig(NodeConfig):
     follow_audio: bool = option(True, "activity placeholders move at the tempo /audio_streamer/status "
                                 "reports as playing")
     title: str = option("HRI Physio", "the name on the splash screen")
-    media_dir: str = option("", "directory for relative file names in requests (empty = the working "
+    media_dir: MediaDir = option("", "directory for relative file names in requests (empty = the working "
                             "directory)")
     initial: str = option("splash", "what to show at start", min_length=1)
     status_rate: float = option(1.0, "periodic status messages (also on every change)", unit="Hz",
