@@ -33,7 +33,7 @@ from hri_physio_bridge.polar.ble import BleError, ClientFactory, Scanner
 from hri_physio_bridge.polar.capture import CaptureError, CaptureWriter, read_capture
 from hri_physio_bridge.polar.config import PolarConfig
 from hri_physio_bridge.polar.devices import help_values, matches
-from hri_physio_bridge.polar.fake import FakePolarDevice, FakeScanner, fake_client_factory
+from hri_physio_bridge.polar.fake import FakePolarDevice, FakeScanner, RecordedArrivalClock, fake_client_factory
 from hri_physio_bridge.polar.lsl_output import LslSink
 from hri_physio_bridge.polar.session import PolarSession, describe_adverts, scan_for_polar
 
@@ -113,6 +113,8 @@ class PolarStreamerNode(ManagedNode):
             capture=self.capture,
             # A replay plays the capture's silences as they were recorded: nothing to restart.
             watchdog=device is None,
+            # ... and its notifications arrive when they were recorded, at any replay speed.
+            arrival_clock=RecordedArrivalClock(device, pylsl.local_clock) if device is not None else None,
         )
         self.session = session
         stop = asyncio.Event()

@@ -120,6 +120,7 @@ class FakePolarDevice:
         self.start_params = dict(start_params or {})
         self.start_status = dict(start_status or {})
         self.timeline = sorted(timeline, key=lambda n: n.t)
+        self.delivering: Notification | None = None  # the notification being handed to its callback
         self.clock = clock
         self.speed = speed
         self.connect_failures = connect_failures
@@ -315,7 +316,11 @@ class FakePolarDevice:
         if source is not None:
             self._sent[source] = self._sent.get(source, 0) + 1
         self.delivered += 1
-        callback(note.char, bytearray(note.data))
+        self.delivering = note
+        try:
+            callback(note.char, bytearray(note.data))
+        finally:
+            self.delivering = None
         if note.char != PMD_DATA:
             return
         self._data_this_connection += 1
@@ -510,6 +515,30 @@ class FakeBleClient:
     async def stop_notify(self, uuid: str) -> None:
         self.device.operations.append(("stop_notify", uuid))
         self.device.subscriptions.pop(uuid, None)
+
+
+class RecordedArrivalClock:
+    """A replay's arrival clock: a notification arrives when the capture says it did, on ``host_clock``.
+
+    The first one delivered anchors the capture's times to the host clock; each later one arrives that
+    much later as recorded, at any replay speed and however late this machine hands it over. A device
+    clock mapped against these arrivals is mapped as the session that recorded them mapped it (at 1000x
+    the real arrivals come 1000 times too soon: a false drift, and samples lost after a clock jump).
+    Between notifications (reads, writes, control point) it is ``host_clock`` itself.
+    """
+
+    def __init__(self, device: FakePolarDevice, host_clock: Callable[[], float]) -> None:
+        self.device = device
+        self.host_clock = host_clock
+        self._origin: tuple[float, float] | None = None  # (host time, capture time) of the first arrival
+
+    def __call__(self) -> float:
+        note = self.device.delivering
+        if note is None:
+            return self.host_clock()
+        if self._origin is None:
+            self._origin = (self.host_clock(), note.t)
+        return self._origin[0] + (note.t - self._origin[1])
 
 
 class FakeScanner:

@@ -105,13 +105,17 @@ class PolarSession:
         capture: CaptureWriter | None = None,
         rng: random.Random | None = None,
         watchdog: bool = True,
+        arrival_clock: Callable[[], float] | None = None,
     ) -> None:
-        """``watchdog`` False: no stall detection (a replay plays its capture's silences as they were)."""
+        """``watchdog`` False: no stall detection (a replay plays its capture's silences as they were).
+        ``arrival_clock``: when a notification arrived, if not ``clock`` (a replay: when the capture says
+        it arrived, so its timing does not depend on the replay speed or on this machine's load)."""
         self.config = config
         self.scanner = scanner
         self.connect = connect
         self.sink = sink
         self.clock = clock
+        self.arrival_clock = arrival_clock or clock
         self._sleep: Sleep = sleep or asyncio.sleep
         self.log = log or logging.getLogger("polar_streamer")
         self.capture = capture
@@ -716,13 +720,13 @@ class PolarSession:
     # ------------------------------------------------------------------------------------------
     # Data
     def _on_data(self, _char: Any, data: bytearray) -> None:
-        arrival = self._now_ns()
+        arrival = round(self.arrival_clock() * NS)
         raw = bytes(data)
         self._record("notify", PMD_DATA, raw, arrival / NS)
         self.data.on_pmd(raw, arrival)
 
     def _on_heart_rate(self, _char: Any, data: bytearray) -> None:
-        arrival = self._now_ns()
+        arrival = round(self.arrival_clock() * NS)
         raw = bytes(data)
         self._record("notify", HEART_RATE_MEASUREMENT, raw, arrival / NS)
         self.data.on_heart_rate(raw, arrival)

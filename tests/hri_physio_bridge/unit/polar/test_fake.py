@@ -2,11 +2,28 @@
 
 from __future__ import annotations
 
+import json
 import random
+from pathlib import Path
 
+import numpy as np
+
+from hri_physio_bridge.polar.capture import read_capture
+from hri_physio_bridge.polar.config import PolarConfig
 from hri_physio_bridge.polar.encode import encode_heart_rate
-from hri_physio_bridge.polar.fake import FakeClock, FakePolarDevice, Notification
+from hri_physio_bridge.polar.fake import (
+    FakeClock,
+    FakePolarDevice,
+    FakeScanner,
+    Notification,
+    RecordedArrivalClock,
+    fake_client_factory,
+    play_through,
+)
 from hri_physio_bridge.polar.gatt import HEART_RATE_MEASUREMENT, PMD_DATA
+from hri_physio_bridge.polar.output import MemorySink
+from hri_physio_bridge.polar.session import PolarSession
+from hri_physio_bridge.polar.synthetic import synthetic_h10, write_capture
 from hri_physio_bridge.polar.virtual_time import run_virtual
 
 HR = encode_heart_rate(70, [900])
@@ -84,3 +101,42 @@ def test_a_recorded_notification_of_an_unknown_measurement_is_passed_on() -> Non
 
     assert run_virtual(play(), clock) == [unknown]
     assert device.lost == 1
+
+
+def replayed_ecg_stamps(capture_path: Path, speed: float) -> tuple[list[float], dict]:
+    """A capture replayed as ``polar_streamer --replay`` does, in virtual time: the ECG stamps pushed."""
+    clock = FakeClock(1000.0)
+    device = FakePolarDevice.from_capture(read_capture(capture_path), speed=speed, clock=clock)
+    config = PolarConfig(replay=str(capture_path), replay_speed=speed, streams=device.recorded_streams())
+    sink = MemorySink()
+
+    async def run() -> PolarSession:
+        session = PolarSession(config, FakeScanner([device], clock), fake_client_factory, sink, clock=clock,
+                               watchdog=False, arrival_clock=RecordedArrivalClock(device, clock))
+        await play_through(session, device)
+        return session
+
+    session = run_virtual(run(), clock)
+    return [t for t, _ in sink.samples["ecg"]], session.status()["streams"]["ecg"]
+
+
+def test_a_replay_gives_the_same_stamps_at_any_speed_even_across_a_clock_jump(tmp_path: Path) -> None:
+    """Notifications arrive when the capture says they did: at 1000x the device clock is not mapped
+    against arrivals 1000 times too soon (a false drift), and the frame after a bad device timestamp is
+    not taken for one out of order (samples were lost at 4x that 1x kept)."""
+    syn = synthetic_h10(20.0, heart_rate=False, ppm=20.0, jitter_ms=6.0, seed=5)
+    path = tmp_path / "c.jsonl"
+    frames = write_capture(path, syn)
+    lines = path.read_text().splitlines()
+    data_lines = [i for i, line in enumerate(lines) if '"pmd_data"' in line]
+    bad = json.loads(lines[data_lines[10]])
+    bad["hex"] = bad["hex"][:2] + "00" * 8 + bad["hex"][18:]  # its device timestamp reads 0
+    lines[data_lines[10]] = json.dumps(bad)
+    path.write_text("\n".join(lines) + "\n")
+    at_1x, stats_1x = replayed_ecg_stamps(path, 1.0)
+    assert stats_1x["clock_jumps"] == 2 and len(at_1x) >= frames * 73 - 1  # to 0 and back: 1 sample at most
+    for speed in (4.0, 1000.0):
+        stamps, stats = replayed_ecg_stamps(path, speed)
+        assert len(stamps) == len(at_1x)
+        assert np.allclose(np.array(stamps) - stamps[0], np.array(at_1x) - at_1x[0], atol=1e-9)
+        assert stats == stats_1x
