@@ -33,7 +33,12 @@ from hri_physio_bridge.polar.ble import BleError, ClientFactory, Scanner
 from hri_physio_bridge.polar.capture import CaptureError, CaptureWriter, read_capture
 from hri_physio_bridge.polar.config import PolarConfig
 from hri_physio_bridge.polar.devices import help_values, matches
-from hri_physio_bridge.polar.fake import FakePolarDevice, FakeScanner, RecordedArrivalClock, fake_client_factory
+from hri_physio_bridge.polar.fake import (
+    FakePolarDevice,
+    FakeScanner,
+    RecordedArrivalClock,
+    fake_client_factory,
+)
 from hri_physio_bridge.polar.lsl_output import LslSink
 from hri_physio_bridge.polar.session import PolarSession, describe_adverts, scan_for_polar
 
