@@ -53,8 +53,9 @@ class ParticipantNodeConfig(NodeConfig):
     strap_jitter: float = option(_P.strap_jitter, "SD of the jitter on the strap's 1-Hz heart rate",
                                  unit="bpm",
                                  ge=0)
-    dropout_rate: float = option(_P.dropout_rate, "share of seconds the strap sends no heart rate",
-                                 ge=0, lt=1)
+    dropout_rate: float = option(_P.dropout_rate, "strap dropouts (bursts of 1-5 s with no heart rate): "
+                                 "a burst starts in a reporting second with chance rate/3, so "
+                                 "rate/(1+2rate/3) of seconds are lost (about rate when small)", ge=0, lt=1)
     reaction_period: float = option(_P.reaction_period, "a new instruction is taken up at the next multiple "
                                     "of this period from the coach's session start (0: at once)", unit="s",
                                     ge=0)
