@@ -52,7 +52,9 @@ def _summary(path: Path) -> _File:
         try:
             reader = SeekingReader(fh)
         except (McapError, ValueError, EOFError) as exc:
-            raise BagError(f"{path} is not an MCAP file ({exc})") from None
+            size = path.stat().st_size
+            why = str(exc).strip() or type(exc).__name__
+            raise BagError(f"{path} is not an MCAP file ({'empty: 0 bytes' if size == 0 else why})") from None
         try:
             summary = reader.get_summary()
         except Exception:

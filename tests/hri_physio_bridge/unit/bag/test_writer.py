@@ -210,6 +210,9 @@ def test_reader_errors_are_one_liners(tmp_path: Path) -> None:
     (tmp_path / "junk.mcap").write_bytes(b"this is not mcap at all" * 10)
     with pytest.raises(BagError, match="not an MCAP file"):
         BagReader(tmp_path / "junk.mcap")
+    (tmp_path / "zero.mcap").write_bytes(b"")
+    with pytest.raises(BagError, match=r"zero\.mcap is not an MCAP file \(empty: 0 bytes\)"):
+        BagReader(tmp_path / "zero.mcap")
     (tmp_path / "emptydir").mkdir()
     with pytest.raises(BagError, match="not a rosbag2 directory"):
         BagReader(tmp_path / "emptydir")
