@@ -29,21 +29,26 @@ from hri_physio_bridge.polar.virtual_time import run_virtual
 HR = encode_heart_rate(70, [900])
 
 
-def delivered_in_replay(clock: FakeClock, first_t: float, speed: float) -> int:
-    """Connect, subscribe, release: how many of three notifications (from ``first_t``) arrive."""
-    timeline = [Notification(first_t + k * 0.5, HEART_RATE_MEASUREMENT, HR) for k in range(3)]
-    device = FakePolarDevice(timeline=timeline, clock=clock, speed=speed)
+def played(device: FakePolarDevice, clock: FakeClock, char: str) -> list[bytes]:
+    """Connect, subscribe to ``char``, release the timeline: what reached the client."""
 
-    async def play() -> int:
+    async def play() -> list[bytes]:
         got: list[bytes] = []
         client = device.client(lambda: None)
         await client.connect()
-        await client.start_notify(HEART_RATE_MEASUREMENT, lambda _c, data: got.append(bytes(data)))
+        await client.start_notify(char, lambda _c, data: got.append(bytes(data)))
         device.release()
         await device.wait_finished()
-        return len(got)
+        return got
 
     return run_virtual(play(), clock)
+
+
+def delivered_in_replay(clock: FakeClock, first_t: float, speed: float) -> int:
+    """How many of three notifications (from ``first_t``) arrive."""
+    timeline = [Notification(first_t + k * 0.5, HEART_RATE_MEASUREMENT, HR) for k in range(3)]
+    device = FakePolarDevice(timeline=timeline, clock=clock, speed=speed)
+    return len(played(device, clock, HEART_RATE_MEASUREMENT))
 
 
 def test_the_first_notification_is_never_lost_whatever_the_clock_and_capture_times() -> None:
@@ -89,17 +94,7 @@ def test_a_recorded_notification_of_an_unknown_measurement_is_passed_on() -> Non
     unstarted_acc = bytes([0x02]) + bytes(9)
     timeline = [Notification(0.0, PMD_DATA, unknown), Notification(0.5, PMD_DATA, unstarted_acc)]
     device = FakePolarDevice(timeline=timeline, clock=clock)
-
-    async def play() -> list[bytes]:
-        got: list[bytes] = []
-        client = device.client(lambda: None)
-        await client.connect()
-        await client.start_notify(PMD_DATA, lambda _c, data: got.append(bytes(data)))
-        device.release()
-        await device.wait_finished()
-        return got
-
-    assert run_virtual(play(), clock) == [unknown]
+    assert played(device, clock, PMD_DATA) == [unknown]
     assert device.lost == 1
 
 
