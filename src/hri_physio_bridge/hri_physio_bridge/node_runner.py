@@ -26,6 +26,7 @@ import io
 import logging
 import sys
 import threading
+import traceback
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
@@ -59,7 +60,8 @@ class ManagedNode(Node):
     - :meth:`run` is called on the main thread while an executor spins the node on another;
       its return value is the exit status. By default it waits for a stop signal or for
       :attr:`finished`.
-    - :meth:`on_stop` is called from the signal handler (keep it short: set flags, wake waits).
+    - :meth:`on_stop` is called on a stop signal (from the signal watcher thread) or after a callback
+      failed (from the executor's thread): keep it short and thread-safe (set flags, wake waits).
     - :meth:`close` is called once at the end, before the node is destroyed (flush, stop threads).
     """
 
@@ -357,29 +359,36 @@ def run_node(
         running.append(node)  # held only while it runs: the node must not outlive this function
 
         def stop_after_a_failed_callback(_exc: BaseException) -> None:
-            for failed in running:
-                failed.on_stop("a failed callback")  # it stops as after a signal, keeping what it has
-            stop.set()
+            try:
+                for failed in running:
+                    failed.on_stop("a failed callback")  # it stops as after a signal, keeping what it has
+            except Exception:
+                traceback.print_exc(file=sys.stderr)  # said before run() ends; the node stops all the same
+            finally:
+                stop.set()
 
         spinner = ExecutorThread(node, on_error=stop_after_a_failed_callback)
         code = node.run(stop)
         if spinner.error is not None:
-            first = (str(spinner.error).strip().splitlines() or [""])[0]
-            print(f"{prog}: error: a callback failed ({type(spinner.error).__name__}: {first}); the node "
-                  "stopped", file=sys.stderr, flush=True)
+            error = spinner.error
+            first = (str(error).strip().splitlines() or [""])[0]
+            what = f"{type(error).__name__}: {first}" if first else type(error).__name__
+            print(f"{prog}: error: a callback failed ({what}); the node stopped", file=sys.stderr, flush=True)
             code = 1
     finally:
         running.clear()
-        if node is not None:
-            try:
-                node.close()
-            finally:
-                if spinner is not None:
-                    spinner.close()
-        if code == 0:  # a failed node has said why already, in its error line
-            print(done_line(prog, code), file=sys.stderr, flush=True)
-        release_stop_handlers()  # its watcher holds the node (on_stop)
-        held, node, spinner = [node], None, None
-        shut_down_node_process(held)  # the node destroyed and freed, then ROS shut down, bounded
+        try:
+            if node is not None:
+                try:
+                    node.close()
+                finally:
+                    if spinner is not None:
+                        spinner.close()
+            if code == 0:  # a failed node has said why already, in its error line
+                print(done_line(prog, code), file=sys.stderr, flush=True)
+        finally:  # also after a close that raised: the bounded teardown always runs
+            release_stop_handlers()  # its watcher holds the node (on_stop)
+            held, node, spinner = [node], None, None
+            shut_down_node_process(held)  # the node destroyed and freed, then ROS shut down, bounded
     return code
 

@@ -257,14 +257,21 @@ class PhysioReceiver:
             channels=tuple(cfg.channel_names) or channels,
         )
         self.input_spec = out_spec
-        self.sink.open_output(out_spec)
-        if cfg.log_data:
-            self._writer = (
-                self._log_writer_factory(out_spec)
-                if self._log_writer_factory
-                else CsvWriter(cfg.log_name or default_log_name(out_spec), out_spec.channels, cfg.dtype)
-            )
-            self.log.info(f"logging every received sample to {self._writer.path}")
+        try:
+            self.sink.open_output(out_spec)
+            if cfg.log_data:
+                self._writer = (
+                    self._log_writer_factory(out_spec)
+                    if self._log_writer_factory
+                    else CsvWriter(cfg.log_name or default_log_name(out_spec), out_spec.channels, cfg.dtype)
+                )
+                self.log.info(f"logging every received sample to {self._writer.path}")
+        except BaseException:
+            # Nothing was received yet: leave nothing behind (an empty output file would make the
+            # corrected rerun refuse to overwrite it).
+            self.source.close()
+            self.sink.abandon()
+            raise
         self.buffer = RingBuffer(
             cfg.buffer_length,
             cfg.num_channels,

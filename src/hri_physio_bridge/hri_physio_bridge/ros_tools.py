@@ -80,7 +80,10 @@ class ExecutorThread:
             self.error = exc
             traceback.print_exc(file=sys.stderr)
             if self._on_error is not None:
-                self._on_error(exc)
+                try:
+                    self._on_error(exc)
+                except Exception:
+                    traceback.print_exc(file=sys.stderr)
 
     def close(self, join_timeout: float = 10.0) -> None:
         """Stop spinning and shut the executor down (the nodes stay for their owner to destroy).

@@ -145,6 +145,7 @@ from hri_physio_bridge.config import NodeConfig, option
 
 class Options(NodeConfig):
     fail_after: int = option(3, "the timer call that raises", ge=1)
+    on_stop_fails: bool = option(False, "on_stop raises too")
 
 class Node(node_runner.ManagedNode):
     def __init__(self, config):
@@ -158,6 +159,8 @@ class Node(node_runner.ManagedNode):
             raise ZeroDivisionError("the bug in this callback")
     def on_stop(self, signal_name):
         print(f"on_stop: {signal_name}", flush=True)
+        if self.config.on_stop_fails:
+            raise RuntimeError("on_stop failed as well")
     def close(self):
         print(f"closed after {self.calls} calls", flush=True)
 
@@ -165,16 +168,18 @@ sys.exit(node_runner.run_node("failing_callback_test", Options, Node, argv=sys.a
 """
 
 
-def test_a_callback_that_raises_stops_the_node_with_status_1(tmp_path) -> None:
+@pytest.mark.parametrize("on_stop_fails", ["false", "true"])
+def test_a_callback_that_raises_stops_the_node_with_status_1(tmp_path, on_stop_fails: str) -> None:
     """The spin ends with the exception: the node stops as after a signal (on_stop, run returns,
-    close), says why in one line after the traceback, and exits 1, instead of living on unspun."""
+    close), says why in one line after the traceback, and exits 1, instead of living on unspun; also
+    when its on_stop fails as well."""
     import subprocess
     import sys
 
     script = tmp_path / "node.py"
     script.write_text(FAILING_CALLBACK_SCRIPT)
-    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120,
-                          stdin=subprocess.DEVNULL)
+    done = subprocess.run([sys.executable, str(script), "--on-stop-fails", on_stop_fails],
+                          capture_output=True, text=True, timeout=120, stdin=subprocess.DEVNULL)
     assert done.returncode == 1, done.stderr
     assert "on_stop: a failed callback" in done.stdout and "closed after 3 calls" in done.stdout, done.stdout
     assert "Traceback" in done.stderr and "ZeroDivisionError: the bug in this callback" in done.stderr

@@ -444,6 +444,7 @@ def test_an_output_that_cannot_be_opened_is_one_error_line(tmp_path: Path, case:
     assert len(errors) == 1 and "cannot open" in errors[0], rx.output
     assert ("Invalid topic name" if case == "topic" else "a_file") in errors[0], rx.output
     assert "Traceback" not in rx.output
+    assert not (tmp_path / "out.csv").exists()  # nothing left behind to block the corrected rerun
 
 
 def test_broken_params_file_is_one_line(tmp_path: Path) -> None:

@@ -198,5 +198,10 @@ class Streamer(abc.ABC):
     def close(self) -> None:  # noqa: B027 - optional hook, most streamers need it
         """Release the transport (idempotent)."""
 
+    def abandon(self) -> None:
+        """Close an output that a failed start leaves before any data: as :meth:`close`, and what it
+        created for nothing goes too (an empty CSV file would refuse the corrected rerun)."""
+        self.close()
+
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.uri!r})"

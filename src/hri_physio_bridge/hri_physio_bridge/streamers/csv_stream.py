@@ -297,6 +297,12 @@ class CsvStreamer(Streamer):
             raise StreamerError(f"{self.uri} is not open as an output")
         self._writer.write(frame)
 
+    def abandon(self) -> None:
+        unused = self._writer.path if self._writer is not None and self._writer.rows_written == 0 else None
+        self.close()
+        if unused is not None:
+            unused.unlink(missing_ok=True)
+
     def close(self) -> None:
         if self._writer is not None:
             self._writer.close()

@@ -257,11 +257,11 @@ def fuzzy_probability_figure(path: Path, timeline: Timeline, title: str) -> Path
     ups = [u for u in timeline.rule_updates if u.hr is not None and u.p is not None]
     if ups:
         hit = [u for u in ups if u.draw is not None and u.draw < u.p]
-        changed = [u for u in hit if u.delta != 0]
-        blocked = [u for u in hit if u.delta == 0]
+        changed = [u for u in hit if u.changed]
+        blocked = [u for u in hit if not u.changed]
         kept = [u for u in ups if u not in hit]
         for group, face, edge, label in (
-            (changed, "#d1342f", "black", f"draw < p: pace changed ({len(changed)})"),
+            (changed, "#d1342f", "black", f"draw < p: pace or activity changed ({len(changed)})"),
             (blocked, "#f4b6b3", "#d1342f", f"draw < p: change not applied (at a ladder end / held) "
                                              f"({len(blocked)})"),
             (kept, "white", "black", f"draw ≥ p: no change ({len(kept)})"),

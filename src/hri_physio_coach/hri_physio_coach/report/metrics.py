@@ -178,19 +178,29 @@ def session_events(timeline: Timeline) -> list[dict[str, Any]]:
 
 
 def _adaptations(timeline: Timeline) -> dict[str, Any]:
+    """Adaptations as the coach and the evaluation count them: every decision that changed the setting
+    (a ladder step or the activity), at a rule update or in a phase's plan (predictive, adaptive)."""
     per_phase: dict[str, dict[str, int]] = {}
+
+    def row_of(phase: str | None) -> dict[str, int]:
+        return per_phase.setdefault(phase or "(none)", {"rule_updates": 0, "adaptations": 0,
+                                                        **dict.fromkeys(RuleOutcome, 0)})
+
     for u in timeline.rule_updates:
-        phase = u.phase or "(none)"
-        row = per_phase.setdefault(phase, {"rule_updates": 0, "adaptations": 0,
-                                           **dict.fromkeys(RuleOutcome, 0)})
+        row = row_of(u.phase)
         row["rule_updates"] += 1
-        row["adaptations"] += int(u.changed)  # a ladder step or a change of activity
+        row["adaptations"] += int(u.changed)
         row[u.outcome] += 1
+    plans = [e for e in timeline.events
+             if e.get("event") == "plan" and (e.get("decision") or {}).get("changed")]
+    for e in plans:
+        row_of(str(e["phase"]) if e.get("phase") is not None else None)["adaptations"] += 1
     actions = Counter(u.action for u in timeline.rule_updates)
     # What the coach said about the zone itself: out of reach, or a gap bridged by alternating two settings.
     notices = [{"t": e.get("t"), "event": e.get("event"), "reason": e.get("reason")} for e in timeline.events
                if e.get("event") in ("zone_out_of_reach", "zone_gap")]
-    return {"total": sum(int(u.changed) for u in timeline.rule_updates),
+    return {"total": sum(int(u.changed) for u in timeline.rule_updates) + len(plans),
+            "planned_changes": len(plans),
             "rule_updates": len(timeline.rule_updates), "per_phase": per_phase, "actions": dict(actions),
             "zone_notices": notices}
 

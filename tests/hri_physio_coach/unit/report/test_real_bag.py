@@ -79,7 +79,9 @@ def test_adaptations_behaviours_and_data_loss(result, independent: Recomputed) -
     report = result.report
     updates = independent.of("rule_update")
     assert report["adaptations"]["rule_updates"] == len(updates) == 39
-    assert report["adaptations"]["total"] == sum(1 for u in updates if u["decision"]["changed"])
+    plans = [p for p in independent.of("plan") if p["decision"]["changed"]]
+    assert report["adaptations"]["total"] == sum(1 for u in updates if u["decision"]["changed"]) + len(plans)
+    assert report["adaptations"]["planned_changes"] == len(plans)
     for phase in ("warm_up", "conditioning", "cool_down"):
         mine = report["adaptations"]["per_phase"][phase]
         theirs = [u for u in updates if u["inputs"]["phase"] == phase]

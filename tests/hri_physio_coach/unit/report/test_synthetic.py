@@ -90,6 +90,10 @@ def session(*, clock: bool = True, stop_at: float | None = None, policy: str = "
                                   else f"HR {hr:.1f}", "hr": hr, "p": p, "draw": draw,
                                   "changed": delta != 0 or action == "change_activity"},
                      "ladder": {"index": 2 + delta, "speed": speed, "tempo": tempo}})
+    if end > 70:  # a phase's plan that changed the setting (predictive, adaptive): an adaptation too
+        ev(wall(70), {"t": to_sim(70), "event": "plan", "phase": "conditioning",
+                      "decision": {"t": to_sim(70), "policy": policy, "action": "plan", "delta": 0,
+                                   "changed": True, "reason": "planned"}})
     for t, kind in ((45, "motivation"), (75, "emotion"), (110, "motivation")):
         if t < end:
             ev(wall(t), {"t": to_sim(t), "event": "behaviour", "kind": kind})
@@ -150,8 +154,9 @@ def test_adaptations_behaviours_and_signal_quality(full) -> None:
     r = full.report
     per = r["adaptations"]["per_phase"]
     # An adaptation is a decision that changed the setting: a ladder step, or (here) the activity.
-    assert r["adaptations"]["total"] == 3 and r["adaptations"]["rule_updates"] == 6
-    assert per["conditioning"]["adaptations"] == 2 and r["adaptations"]["actions"]["change_activity"] == 1
+    assert r["adaptations"]["total"] == 4 and r["adaptations"]["rule_updates"] == 6
+    assert per["conditioning"]["adaptations"] == 3 and r["adaptations"]["actions"]["change_activity"] == 1
+    assert r["adaptations"]["planned_changes"] == 1
     assert per["warm_up"]["speed up"] == 1 and per["warm_up"]["no change"] == 1
     assert per["conditioning"]["slow down"] == 1 and per["conditioning"]["no update (no HR)"] == 1
     assert per["cool_down"]["no change"] == 1
