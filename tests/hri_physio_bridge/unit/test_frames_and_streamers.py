@@ -324,3 +324,26 @@ def test_csv_replay_waits_for_a_row_at_most_the_timeout_and_never_holds_due_rows
     for t, when in got:
         assert when == pytest.approx(t - 10.0, abs=1e-6)  # each row when it is due, not later
     assert calls > 600  # the gap was waited out in calls of 0.1 s
+
+
+def test_a_fast_paced_csv_comes_in_chunks_of_at_most_the_batch_window(tmp_path: Path) -> None:
+    """1 kHz rows at 1x: chunks of about BATCH_WINDOW (50 rows), none held back longer than that."""
+    from hri_physio_bridge.streamers.csv_stream import BATCH_WINDOW
+
+    path = tmp_path / "fast.csv"
+    path.write_text("t,a\n" + "".join(f"{100 + i / 1000},{i}\n" for i in range(1000)))
+    now = [0.0]
+
+    def sleep(dt: float) -> None:
+        now[0] += dt
+
+    s = CsvStreamer(f"{path}?rate=1", max_chunk=1024, monotonic=lambda: now[0], sleep=sleep)
+    s.open_input()
+    sizes, late = [], []
+    while not s.exhausted:
+        frame = s.receive(timeout=0.1)
+        if frame is not None:
+            sizes.append(frame.num_samples)
+            late += [now[0] - (t - 100.0) for t in frame.timestamps]  # how long after it was due
+    assert sum(sizes) == 1000 and len(sizes) <= 1000 / (BATCH_WINDOW * 1000) + 2
+    assert max(late) <= BATCH_WINDOW + 1e-6

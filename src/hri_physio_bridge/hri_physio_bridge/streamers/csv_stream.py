@@ -120,6 +120,11 @@ class CsvWriter:
             self._file = None
 
 
+#: Seconds of paced rows sent as one chunk at most (wall time at the replay rate): rows are held back
+#: this long at most, as a chunking LSL outlet would.
+BATCH_WINDOW = 0.05
+
+
 class CsvStreamer(Streamer):
     scheme = "csv"
 
@@ -204,7 +209,8 @@ class CsvStreamer(Streamer):
 
         A row not yet due is waited for at most ``timeout`` (None: not yet, and the row is kept for
         the next call), so a stop never waits out a long gap in the timestamps, and the rows before a
-        gap go out when they are due, not with the first row after it.
+        gap go out when they are due, not with the first row after it. Rows due within ``BATCH_WINDOW``
+        of the first one go out with it.
         """
         if self._reader is None or self._lines is None or self.spec is None:
             raise StreamerError(f"{self.uri} is not open as an input")
@@ -213,19 +219,25 @@ class CsvStreamer(Streamer):
         deadline = self._monotonic() + max(timeout, 0.0)
         stamps: list[float] = []
         values: list[list[float]] | list[list[str]] = []
+        batch_end = deadline  # set when the first row is taken
         while len(stamps) < self.max_chunk:
             row = self._next_row()
             if row is None:
                 break
             wait = self._until_due(row[0])
             if wait > 0:
-                left = deadline - self._monotonic()
-                if stamps or wait > left:
-                    if not stamps and left > 0:
-                        self._sleep(left)
+                now = self._monotonic()
+                # The first row is waited for up to the timeout; later ones join its chunk if they are
+                # due within BATCH_WINDOW of it (a 1 kHz file is not sent a row at a time).
+                limit = deadline - now if not stamps else min(deadline, batch_end) - now
+                if wait > limit:
+                    if not stamps and limit > 0:
+                        self._sleep(limit)
                     self._held = row
                     break
                 self._sleep(wait)
+            if not stamps:
+                batch_end = self._monotonic() + BATCH_WINDOW
             stamps.append(row[0])
             values.append(row[1])
         if not stamps:
