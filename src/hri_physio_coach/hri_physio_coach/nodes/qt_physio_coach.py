@@ -273,7 +273,9 @@ class QtPhysioCoachNode(ManagedNode):
     def on_stop(self, signal_name: str) -> None:
         self.get_logger().info(f"{signal_name} received: stopping the session")
         with self._lock:
-            self.control.stop_reason = self.control.stop_reason or "signal"
+            # A signal, or a failed callback (run_node names it): the session record says which.
+            self.control.stop_reason = self.control.stop_reason or (
+                "signal" if signal_name.startswith("SIG") else signal_name)
         self._wake.set()
 
     def run(self, stop: threading.Event) -> int:
