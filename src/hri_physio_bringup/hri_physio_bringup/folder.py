@@ -47,7 +47,13 @@ class SessionFolder:
         return cls(path)
 
     def create(self) -> None:
-        """Make the folder and its sub-folders; a folder that appeared meanwhile is never reused."""
+        """Make the folder and its sub-folders; a folder that appeared meanwhile is never reused.
+
+        FileExistsError only when another session took the name; a parent that is not a directory is
+        NotADirectoryError (an OSError naming it)."""
+        for parent in (self.path.parent, *self.path.parent.parents):
+            if parent.exists() and not parent.is_dir():
+                raise NotADirectoryError(20, "is a file, not a directory", str(parent))
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.path.mkdir()  # FileExistsError: another session took the name
         for sub in (LOG_DIR, CONFIG_DIR):

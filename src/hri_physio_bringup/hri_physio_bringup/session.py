@@ -797,7 +797,8 @@ def main(argv: list[str] | None = None) -> int:
             except FileExistsError:  # the same participant started another session this second
                 folder = SessionFolder.plan(options.out, label, started)
             except OSError as exc:
-                print(f"{PROG}: error: cannot create the session folder {folder.path}: {exc.strerror}",
+                where = f" ({exc.filename})" if exc.filename and str(exc.filename) != str(folder.path) else ""
+                print(f"{PROG}: error: cannot create the session folder {folder.path}: {exc.strerror}{where}",
                       file=sys.stderr, flush=True)
                 return 1
         plan = plan_session(options, folder, device, coach)

@@ -57,3 +57,15 @@ def test_the_path_is_shown_relative_to_where_the_user_is(tmp_path: Path) -> None
     folder = SessionFolder.plan(tmp_path / "sessions", "P-1", START)
     assert folder.display(cwd=tmp_path) == "sessions/P-1_2026-05-04_10-30-00"
     assert folder.display(cwd=tmp_path / "elsewhere") == str(folder.path.resolve())
+
+
+def test_an_out_folder_that_is_a_file_is_not_taken_for_a_name_taken(tmp_path: Path) -> None:
+    """``--out`` naming a file: NotADirectoryError naming it (one error line in the launcher), not the
+    FileExistsError that makes the launcher try the next name, 100 times."""
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a folder")
+    for parent in (blocker, blocker / "sub"):
+        folder = SessionFolder.plan(parent, "P-1", datetime(2026, 1, 2, 3, 4, 5))
+        with pytest.raises(NotADirectoryError) as info:
+            folder.create()
+        assert info.value.filename == str(blocker)
