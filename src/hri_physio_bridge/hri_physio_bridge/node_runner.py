@@ -275,7 +275,8 @@ def _rcl_message(exc: Exception) -> str:
     return str(exc).split(", at /")[0].strip()
 
 
-def _one_line(exc: Exception) -> str:
+def one_line(exc: Exception) -> str:
+    """The first line of an exception's message (its type when it has none), for one-line errors."""
     text = str(exc).strip()
     return text.splitlines()[0] if text else type(exc).__name__
 
@@ -338,7 +339,7 @@ def run_node(
         try:
             code = offline(config, args)
         except (ConfigError, *startup_errors) as exc:
-            return fail(prog, _one_line(exc))
+            return fail(prog, one_line(exc))
         if code is not None:
             return code
 
@@ -354,7 +355,7 @@ def run_node(
         try:
             node = make_node(config) if isinstance(make_node, type) else make_node(config, args)
         except (ConfigError, ParameterException, NameValidationException, *startup_errors) as exc:
-            return fail(prog, _one_line(exc))
+            return fail(prog, one_line(exc))
         stop = install_stop_handlers(node.on_stop)
         running.append(node)  # held only while it runs: the node must not outlive this function
 

@@ -19,7 +19,7 @@ from rclpy.exceptions import InvalidTopicNameException
 from std_msgs.msg import String
 
 from hri_physio_bridge.config import ConfigError
-from hri_physio_bridge.node_runner import ManagedNode, fail, logic_logger, run_node
+from hri_physio_bridge.node_runner import ManagedNode, fail, logic_logger, one_line, run_node
 from hri_physio_bridge.receiver import PhysioReceiver, ReceiverConfig
 from hri_physio_bridge.streamers import OpenCancelled, Streamer, StreamerError, create_streamer
 
@@ -62,8 +62,7 @@ class PhysioReceiverNode(ManagedNode):
             return 1
         except (InvalidTopicNameException, OSError) as exc:  # a topic or a file the options name
             receiver.request_stop()
-            detail = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            return fail(PROG, f"cannot open {receiver.source.uri} -> {receiver.sink.uri}: {detail}")
+            return fail(PROG, f"cannot open {receiver.source.uri} -> {receiver.sink.uri}: {one_line(exc)}")
         receiver.start()
         if self.config.interactive:
             threading.Thread(target=_console, args=(receiver, stop), daemon=True).start()
