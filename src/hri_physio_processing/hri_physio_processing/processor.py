@@ -87,6 +87,7 @@ class _View:
 class ProcessorStats:
     windows: int = 0
     flagged_windows: int = 0
+    inverted_windows: int = 0  # ECG windows turned over before peak detection (ecg_polarity)
     published_peaks: int = 0
     duplicate_peaks: int = 0
     gaps: int = 0
@@ -271,6 +272,10 @@ class NeurokitProcessor:
         res = extract(w.timestamps, w.values[:, 0], self.settings)
         self.stats.windows += 1
         self.stats.flagged_windows += not res.ok
+        self.stats.inverted_windows += res.inverted
+        if res.polarity_clear and res.inverted != self.settings.ecg_inverted_when_unclear:
+            # A strap keeps its polarity: a window that cannot tell (noise) takes the last clear one.
+            self.settings = replace(self.settings, ecg_inverted_when_unclear=res.inverted)
         view = self._view(w, res)
         start = self._region_start(view)
         end = self._region_end(w, view, start)
@@ -350,7 +355,7 @@ class NeurokitProcessor:
             return _View(w.timestamps, res.clean, res.peaks, 0)
         x = np.concatenate([w.pre_values[:, 0], w.values[:, 0]])
         try:
-            clean, peaks = detect(x, self.settings)
+            clean, peaks = detect(x, self.settings, inverted=res.inverted)
         except Exception:  # the window itself was fine; keep its own result
             return _View(w.timestamps, res.clean, res.peaks, 0)
         return _View(np.concatenate([w.pre_timestamps, w.timestamps]), clean, peaks, lead)
@@ -448,6 +453,7 @@ class NeurokitProcessor:
             "features": {k: (v if math.isfinite(v) else None) for k, v in res.scalars.items()},
             "peaks_in_window": int(res.peaks.shape[0]),
             "beats": dict(res.beats),
+            **({"ecg_inverted": res.inverted} if self.cfg.mode == "ecg" else {}),
             **({"hrv_method": hrv.METHODS[self.settings.hrv_spectrum]} if "lf" in SCALARS[self.cfg.mode]
                else {}),
             "peaks_published": int(peaks.shape[0]),

@@ -130,10 +130,11 @@ def render(report: dict[str, Any], figures: dict[str, Path], configs: dict[str, 
         parts.append(_table(["Rule update not run because", "Count"],
                             sorted(sq["rule_updates_gated"].items())))
     if sq.get("processor"):
-        parts.append(_table(["Processor status", "Windows", "Flagged", "Flags", "Discontinuities",
-                             "Missing samples reported"],
-                            [[t, v["windows"], v["windows_flagged"], v["flags"], v["discontinuities"],
-                              v["missing_samples_reported"]] for t, v in sq["processor"].items()]))
+        parts.append(_table(["Processor status", "Windows", "Flagged", "ECG turned over", "Flags",
+                             "Discontinuities", "Missing samples reported"],
+                            [[t, v["windows"], v["windows_flagged"], v.get("windows_inverted", 0), v["flags"],
+                              v["discontinuities"], v["missing_samples_reported"]]
+                             for t, v in sq["processor"].items()]))
     if report.get("receivers"):
         recv = report["receivers"]
         keys = sorted({k for v in recv.values() for k in v})
