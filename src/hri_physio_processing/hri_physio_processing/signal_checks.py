@@ -2,7 +2,8 @@
 
 A window that fails one of these is flagged and its features are NaN: NeuroKit2 would
 otherwise turn a detached electrode (flat line), a clipped amplifier (saturation), dropped
-samples (NaN) or a misconfigured sampling rate into plausible-looking numbers.
+samples (NaN), a corrupt value or a misconfigured sampling rate into plausible-looking numbers
+(or into an error that names none of them).
 """
 
 from __future__ import annotations
@@ -73,6 +74,10 @@ def check_values(
             "stream stalled",
         ))
         return flags
+    corrupt = _corrupt_samples(x)
+    if corrupt is not None:
+        flags.append(corrupt)
+        return flags  # one such value swamps every filter and peak after it
     lo, hi = float(x.min()), float(x.max())
     at_rail = int(np.count_nonzero(x == hi)) + int(np.count_nonzero(x == lo))
     if at_rail / x.shape[0] >= saturation_fraction:
@@ -82,3 +87,25 @@ def check_values(
             "clipped signal",
         ))
     return flags
+
+
+#: A sample this many times the window's 1-99 % range away from its median is not a signal (no
+#: artefact of a body or an amplifier reaches that): a corrupt value, a unit mix-up, a decoding error.
+CORRUPT_FACTOR = 1e4
+
+
+def _corrupt_samples(x: np.ndarray) -> Flag | None:
+    """Samples absurdly far from the rest of the window (one ruins the filters: no beat is found)."""
+    lo, mid, hi = np.percentile(x, [1.0, 50.0, 99.0])
+    spread = float(hi - lo)
+    if spread <= 0.0:
+        return None
+    with np.errstate(over="ignore"):
+        distance = np.abs(x - mid)
+    far = distance > CORRUPT_FACTOR * spread
+    if not far.any():
+        return None
+    worst = float(x[int(np.argmax(distance))])
+    return Flag("corrupt_values", f"{int(far.sum())} sample(s) more than {CORRUPT_FACTOR:g} times the "
+                f"window's 1-99 % range ({spread:.3g}) from its median, the farthest {worst:.3g}: "
+                "corrupt values, not a signal")

@@ -66,6 +66,24 @@ def test_signal_checks() -> None:
     assert longest_run(np.zeros(5, dtype=bool)) == 0
 
 
+@pytest.mark.parametrize("value", [1e308, -1e200, 1e20, 2e4])
+def test_a_corrupt_sample_flags_only_windows_that_hold_it_and_says_so(mitdb, value: float) -> None:
+    """One absurd value (a decoding error, a unit mix-up) in real ECG: before, the windows holding it
+    said "only 1 beat(s) found" or "NeuroKit2 failed: IndexError"; a real artefact stays processed."""
+    x = mitdb.x[: 60 * FS].copy()  # MIT-BIH in mV: its 1-99 % range is about 1.5
+    x[30 * FS] = value
+    _, out = _run(x)
+    for st in statuses(out):
+        w = st["window"]
+        holds = w["t_start"] <= 30.0 <= w["t_end"]
+        assert (_flags(st) == {"corrupt_values"}) == holds, st
+        if holds:
+            assert f"the farthest {value:.3g}" in st["flags"][0]["reason"], st["flags"]
+    spike = mitdb.x[: 60 * FS].copy()
+    spike[30 * FS] = 50.0  # a big artefact, 30 times the range: processed
+    assert features(spike).ok
+
+
 def test_real_quantised_ecg_is_not_flagged_saturated(mitdb) -> None:
     """MIT-BIH's 11-bit ADC values (5 uV steps) must not look clipped or flat."""
     raw = np.round(mitdb.x[: 60 * FS] * 200) / 200
