@@ -48,6 +48,10 @@ class LineClassifier:
                                                                  "The above exception")):
                 return None
             self._in_traceback = False
+            if text == "KeyboardInterrupt":
+                # Only the launcher's own SIGINT, come before the node had its handler (still starting,
+                # being stopped): no crash to report. A node past its start handles SIGINT itself.
+                return None
             return ERROR, f"crashed: {text}"
         if text.startswith(_TRACEBACK):
             self._in_traceback = True

@@ -413,6 +413,8 @@ class Outcome:
     restarts: list[dict[str, Any]] = field(default_factory=list)
     lost: dict[str, Any] | None = None
     awaiting_restart: list[str] = field(default_factory=list)  # dead, their backoff not over at the end
+    #: Stopped (Ctrl-C, SIGTERM) before the system was ready: not a failure, the session never began.
+    stopped_in_startup: bool = False
 
     def fail(self, problem: str, code: int = 1) -> None:
         if self.problem is None:
@@ -482,6 +484,10 @@ def drive(done: Callable[[], bool], clock: SimClock, stop: threading.Event) -> b
             return done()
 
 
+#: What :func:`wait_for_system` says when a stop came before the system was ready.
+INTERRUPTED_IN_STARTUP = "interrupted during start-up"
+
+
 def wait_for_system(watcher: ClockAndWatcher, group: ProcessGroup, clock: SimClock, view: SessionView,
                     stop: threading.Event, timeout: float, say: Callable[[str], None] = print) -> str | None:
     """Drive the clock until the robot side listens and heart rate reaches the coach's input."""
@@ -511,7 +517,7 @@ def wait_for_system(watcher: ClockAndWatcher, group: ProcessGroup, clock: SimClo
             return f"{p.name} exited during start-up with status {p.returncode}: {p.error_line()}"
         return None
     if stop.is_set():
-        return "interrupted during start-up"
+        return INTERRUPTED_IN_STARTUP
     with watcher.lock:
         strap = view.strap_samples
         waiting = [] if watcher.hosts is None else watcher.hosts.waiting_for()
@@ -605,6 +611,10 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
     try:
         start_nodes(group, plan, folder)
         problem = wait_for_system(watcher, group, clock, view, stop, options.startup_timeout, console.say)
+        if problem == INTERRUPTED_IN_STARTUP:  # the researcher's stop: the session never began
+            out.stopped_in_startup = True
+            console.say("[session] stopped during start-up: the session did not begin")
+            return clock
         if problem:
             out.fail(problem)
             return clock
@@ -860,12 +870,18 @@ def _run(options: SessionConfig, plan: SessionPlan, folder: SessionFolder, claim
         if out.restarts:
             console.say(restarts_text(out.restarts))
         # A node that died and was waiting for its restart when the session ended is in out.restarts.
-        bad = {name: c for name, c in out.node_codes.items() if c != 0 and name not in out.awaiting_restart}
+        # Stopped in start-up, a node may have had no signal handler yet: SIGINT ended it (-2), or it
+        # was in the interpreter's own start (a fatal error, 1). The session never began: no failure.
+        bad = {} if out.stopped_in_startup else {
+            name: c for name, c in out.node_codes.items() if c != 0 and name not in out.awaiting_restart}
         if bad and out.code == 0:
             out.fail(f"node exit statuses {bad}")
         if not stop.is_set() and view.ended_at is None and out.code == 0:
             out.fail("the session did not reach its end")
-        report = _report(folder, console) if bag is not None and not options.no_report else None
+        began = view.started_at is not None
+        if bag is not None and not options.no_report and not began:
+            console.say("[session] no report: the session did not begin (the bag holds its start-up)")
+        report = _report(folder, console) if bag is not None and not options.no_report and began else None
         folder.write_summary(_summary_json(options, plan, folder, claim, started, view, out, group, clock,
                                            report, lab=lab))
         if out.problem:

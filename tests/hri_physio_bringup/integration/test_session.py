@@ -152,6 +152,38 @@ def test_sigint_stops_every_node_and_leaves_a_bag_a_summary_and_a_report(short_s
     assert report["hr_rest"] == pytest.approx(zone["hr_rest"], abs=0.01)
 
 
+def test_ctrl_c_during_start_up_stops_the_session_before_it_began(short_session: list[str]) -> None:
+    """The researcher's stop while the nodes are still starting (a wrong participant id, say) is not a
+    failure: exit 0, outcome "not started", every node stopped, no report of a session that never
+    began. A node stopped before it had a signal handler (SIGINT ended it: -2; inside the
+    interpreter's own start: 1) is not a failed node, and its KeyboardInterrupt is not a crash."""
+    # At 1x on the processor's heart rate the system cannot be ready before its first 60-s window.
+    session = NodeProcess("hri_physio_session", *short_session, "--speed", "1", "--hr-source", "ecg",
+                          env=session_env())
+    try:
+        session.wait_for_output("[session] folder ", timeout=60)
+        coach_log = session_folder_of_running(session.output) / "logs" / "qt_physio_coach.log"
+        wait_until(lambda: coach_log.exists() or session.proc.poll() is not None, 60,
+                   lambda: f"the coach's start\n{session.output}", period=0.1)
+        code = session.stop(signal.SIGINT, timeout=120)
+    finally:
+        session.stop(signal.SIGKILL)
+    out = session.output
+    assert code == 0, failed_nodes_logs(out)
+    assert "[session] stopped during start-up: the session did not begin" in out, out
+    assert "hri_physio_session: error" not in out, out
+    folder = session_folder(out)
+    summary = json.loads((folder / "summary.json").read_text())
+    assert (summary["outcome"], summary["stopped_by"], summary["exit_status"], summary["problem"]) == (
+        "not started", "SIGINT", 0, None), summary
+    # Each node was stopped; one still starting may have had no handler yet (its status is kept).
+    assert all(node["exit_status"] is not None for node in summary["nodes"].values()), summary["nodes"]
+    assert "crashed: KeyboardInterrupt" not in out, out
+    # (The recorder, stopped before it made its bag, leaves none.)
+    assert ("no report: the session did not begin" in out) == (folder / "bag").exists(), out
+    assert not (folder / "report.json").exists()
+
+
 def coach_state(url: str) -> dict:
     """The coach's current state (/coach/state, latched), as a live-view client gets it on subscribing."""
     live = watch(url, {topics.COACH_STATE: 1}, timeout=60)

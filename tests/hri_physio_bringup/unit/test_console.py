@@ -46,6 +46,14 @@ def test_a_traceback_is_one_error_line_its_exception() -> None:
     assert [r for r in map(classify, lines) if r] == [(ERROR, "crashed: ValueError: bad value")]
 
 
+def test_a_keyboard_interrupt_in_a_starting_node_is_not_a_crash() -> None:
+    """The launcher's SIGINT reached a node still importing: its traceback ends in KeyboardInterrupt."""
+    classify = LineClassifier()
+    lines = ["Traceback (most recent call last):", '  File "pydantic/main.py", line 9', "KeyboardInterrupt",
+             "Traceback (most recent call last):", '  File "x.py", line 3', "KeyboardInterruptError: no"]
+    assert [r for r in map(classify, lines) if r] == [(ERROR, "crashed: KeyboardInterruptError: no")]
+
+
 def test_the_same_warning_is_echoed_a_few_times_then_left_to_the_log() -> None:
     echo = EchoFilter(max_repeats=2)
     shown = [echo("hr_receiver", f"[WARN] [1.0] [hr_receiver]: gap of {n} samples") for n in range(6)]
