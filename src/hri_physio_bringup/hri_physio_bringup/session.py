@@ -45,6 +45,7 @@ import sys
 import threading
 import time
 import traceback
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import datetime
@@ -866,7 +867,8 @@ def _run(options: SessionConfig, plan: SessionPlan, folder: SessionFolder, claim
         console.close()
         bag = folder.bag if not options.no_record and folder.bag.exists() else None
         now = None if clock is None else clock.t
-        console.say(summary(view, out.wall, str(bag) if bag else None, now=now))
+        restarted = Counter(r["node"] for r in out.restarts)
+        console.say(summary(view, out.wall, str(bag) if bag else None, now=now, restarts=dict(restarted)))
         if out.restarts:
             console.say(restarts_text(out.restarts))
         # A node that died and was waiting for its restart when the session ended is in out.restarts.

@@ -155,7 +155,8 @@ class SessionView:
                 f"zone {zone}  {pace}  adaptations {self.adaptations}  robot actions {self.robot_actions}")
 
 
-def summary(view: SessionView, wall: float, bag: str | None, now: float | None = None) -> str:
+def summary(view: SessionView, wall: float, bag: str | None, now: float | None = None,
+            restarts: dict[str, int] | None = None) -> str:
     """The closing lines; ``now`` (sim time) measures a session stopped before its end."""
     t0, t1 = view.started_at, view.ended_at
     end = t1 if t1 is not None else now
@@ -185,18 +186,24 @@ def summary(view: SessionView, wall: float, bag: str | None, now: float | None =
           if view.conflict else []),
         f"[session] heart-rate samples on the coach's input during the session: {view.hr_samples}"
         + (f"; recorded to {bag}" if bag else ""),
-        *(f"[session] {node}: {receiver_text(status)}" for node, status in sorted(view.receivers.items())),
+        *(f"[session] {node}: {receiver_text(status, (restarts or {}).get(node, 0))}"
+          for node, status in sorted(view.receivers.items())),
         *([f"[session] polar_streamer: {strap_text(view.strap_status)}"] if view.strap_status else []),
     ])
 
 
-def receiver_text(status: dict) -> str:
-    """A receiver's last status in words: what it received, published, and what went missing."""
+def receiver_text(status: dict, restarts: int = 0) -> str:
+    """A receiver's last status in words: what it received, published, and what went missing.
+
+    The status is its last process's: after ``restarts`` restarts it counts since the last one (what
+    its source sent while it was down is on the launcher's restarts line)."""
     received, published = status.get("received_samples"), status.get("published_samples")
     text = f"{received} samples received, {published} published"
     lost = [f"{status[k]} {k.replace('_', ' ')}" for k in ("gaps", "missing_samples", "rejected_chunks")
             if status.get(k)]
-    return text + (f" ({', '.join(lost)})" if lost else ", nothing lost")
+    text += f" ({', '.join(lost)})" if lost else ", nothing lost"
+    return text + (f" (counted since its restart {restarts}; what its source sent while it was down: "
+                   "the restarts line)" if restarts else "")
 
 
 def strap_text(status: dict) -> str:

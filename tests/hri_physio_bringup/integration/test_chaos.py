@@ -81,6 +81,9 @@ def test_every_restartable_node_killed_once_is_restarted_and_only_the_gaps_lose_
                for r in restarts), restarts
     assert all(summary["nodes"][n]["restarts"] == 1 and summary["nodes"][n]["exit_status"] == 0
                for n in RESTARTABLE), summary["nodes"]
+    for node in RECEIVERS:  # its closing line counts its last process only, and says so
+        line = next(x for x in out.splitlines() if x.startswith(f"[session] {node}: "))
+        assert "(counted since its restart 1; " in line, line
     for node in RESTARTABLE:
         log = (folder / "logs" / f"{node}.log").read_text()
         assert f"[session] --- {node} died with exit status -9 (SIGKILL): restart 1 of 3" in log, node

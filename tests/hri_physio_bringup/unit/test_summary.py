@@ -58,6 +58,11 @@ def test_receiver_lines_say_what_was_lost() -> None:
     view = started()
     view.receivers["hr_receiver"] = {"received_samples": 5, "published_samples": 5}
     assert "[session] hr_receiver: 5 samples received, 5 published, nothing lost" in summary(view, 1.0, None)
+    # Restarted: the status is its last process's, and the samples lost meanwhile are elsewhere.
+    line = next(x for x in summary(view, 1.0, None, restarts={"hr_receiver": 1}).splitlines()
+                if x.startswith("[session] hr_receiver:"))
+    assert line == ("[session] hr_receiver: 5 samples received, 5 published, nothing lost (counted since its "
+                    "restart 1; what its source sent while it was down: the restarts line)")
 
 
 def test_the_session_starts_once_the_coachs_commands_reach_every_listener() -> None:
