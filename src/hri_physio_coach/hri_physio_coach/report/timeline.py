@@ -44,6 +44,11 @@ class SessionClock:
             span = self._x[-1] - self._x[0]
             self._slope = (self._y[-1] - self._y[0]) / span if span > 0 else 1.0
 
+    @property
+    def last(self) -> float:
+        """The last recorded /clock time (inf when there is no /clock to map by)."""
+        return float(self._y[-1]) if self.mapped else math.inf
+
     @classmethod
     def from_tables(cls, tables: BagTables) -> SessionClock:
         return cls(*tables.clock) if tables.clock is not None else cls()
@@ -195,7 +200,9 @@ def build_timeline(tables: BagTables, events_topic: str, state_topic: str,
     else:
         last_seen = [float(events[-1]["t"])]
         if tables.end_ns is not None:
-            last_seen.append(float(clock(tables.end_ns)))
+            # Session time does not pass once its /clock stops: what the nodes published as they
+            # stopped (seconds of wall time after it) is not projected at the session's speed.
+            last_seen.append(min(float(clock(tables.end_ns)), clock.last))
         end, outcome, reason = max(last_seen), "incomplete", None
     phases = _spans(by_kind.get("phase", []), "phase", "kind", "phase", end)
     activities = _spans(by_kind.get("activity", []), "activity", "phase", "label", end, phases)

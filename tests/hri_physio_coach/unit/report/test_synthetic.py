@@ -46,12 +46,13 @@ def hr_value(k: int) -> float:
 
 
 def session(*, clock: bool = True, stop_at: float | None = None, policy: str = "threshold",
-            ecg: bool = True, rosout: bool = True) -> BagBuilder:
+            ecg: bool = True, rosout: bool = True, killed: bool = False) -> BagBuilder:
+    """``killed``: the coach died at ``stop_at`` (no end event) and the launcher stopped its /clock there."""
     b = BagBuilder()
     end = 180.0 if stop_at is None else stop_at
     to_sim = (lambda s: SIM0 + s) if clock else (lambda s: wall(s) / 1e9)
     if clock:
-        for i in range(0, 1901):
+        for i in range(0, 1901 if not killed else int(end * 10) + 1):
             b.add("/clock", "rosgraph_msgs/msg/Clock", wall(i / 10), clock_msg(SIM0 + i / 10))
     if rosout:
         b.add("/rosout", "rcl_interfaces/msg/Log", wall(0) - 10**8,
@@ -104,7 +105,7 @@ def session(*, clock: bool = True, stop_at: float | None = None, policy: str = "
         {"t": to_sim(30), "policy": policy, "ladder_speed": 1.0, "ladder_tempo": 120.0})))
     if stop_at is None:
         ev(wall(180), {"t": to_sim(180), "event": "session_end", "duration": 180.0})
-    else:
+    elif not killed:
         ev(wall(stop_at), {"t": to_sim(stop_at), "event": "session_stopped", "reason": "SIGINT"})
     for k in range(0, 190):
         if k in DROPPED or k + 0.5 > end + 5:
@@ -202,6 +203,18 @@ def test_a_wall_clock_session_needs_no_clock(tmp_path: Path) -> None:
     assert result.report["time_base"] == "recorder receive time"
     assert result.report["in_zone_fraction"]["warm_up"] == 0.6
     assert result.out_dir == tmp_path
+
+
+def test_a_killed_coachs_session_ends_at_the_last_clock_not_at_the_last_message(tmp_path: Path) -> None:
+    """The coach died at 100 s: no end event; the launcher's clock stopped there while the nodes went on
+    publishing for a few wall seconds as they stopped. Those seconds are not session time (before,
+    they were projected at the session's speed: 3 wall seconds made 130 s of a 100-s session)."""
+    b = session(stop_at=100.0, ecg=False, killed=True)
+    b.add(topics.POLAR_H10_HR, "std_msgs/msg/Float64MultiArray", wall(130.0),
+          frame_msg(np.array([1000.0 + 130.0]), np.array([150.0]), ("hr",)))
+    r = make_report(b.write(tmp_path / "bag"), figures=False).report
+    assert r["session"]["outcome"] == "incomplete"
+    assert r["session"]["duration_s"] == 100.0
 
 
 def test_stopped_session_reports_what_ran(tmp_path: Path) -> None:
