@@ -651,6 +651,8 @@ class ExerciseCoach(Listener):
                   "hr_clock_offset": self.monitor.clock_offset, "phase": phase.name if phase else None,
                   "phase_kind": phase.kind if phase else None,
                   "activity": activity.name if activity else None,
+                  # what the person does now: the slot's own activity, or the one run in its place
+                  "performed": self.choice.current.name if self.choice.current else None,
                   "zone": [self.zone.low, self.zone.high] if self.zone else None,
                   "ladder_index": self.ladder.index}
         gate = (gates.Gate(gates.NO_ZONE, "no heart-rate zone yet") if self.zone is None

@@ -71,6 +71,15 @@ def test_the_predictive_coach_runs_the_chosen_activity_and_says_so() -> None:
         assert "marching" not in {a for a, c in zip(run.activity, conditioning, strict=True) if c}
     said = [c for c in (e["command"] for e in run.of("command")) if "Back to marching" in c]
     assert len(said) < 4  # the routine's marching lines are not said where another activity runs
+    # Each rule update names the routine's slot (activity) and what the person does (performed).
+    performed, seen = None, []
+    for e in run.events:
+        if e.get("event") in ("activity", "activity_choice"):  # a slot starts; another is run in it
+            performed = e["activity"]
+        elif e.get("event") == "rule_update" and e["inputs"]["phase_kind"] in ("warm_up", "conditioning"):
+            assert e["inputs"]["performed"] == performed, (e["t"], e["inputs"])
+            seen.append(e["inputs"]["performed"] != e["inputs"]["activity"])
+    assert any(seen)  # some rule updates came while another activity ran in the slot
 
 
 def test_out_of_reach_is_said_once_and_the_hardest_setting_kept() -> None:
@@ -92,3 +101,4 @@ def test_the_thesis_policies_run_the_routine_as_written(policy: str) -> None:
     marching = (run.t >= 486) & (run.t < 545)
     assert {a for a, m in zip(run.activity, marching, strict=True) if m} == {"marching"}
     assert run.of("session_end")
+    assert all(e["inputs"]["performed"] == e["inputs"]["activity"] for e in run.of("rule_update"))
