@@ -96,8 +96,12 @@ CORRUPT_FACTOR = 1e4
 
 def _corrupt_samples(x: np.ndarray) -> Flag | None:
     """Samples absurdly far from the rest of the window (one ruins the filters: no beat is found)."""
-    lo, mid, hi = np.percentile(x, [1.0, 50.0, 99.0])
-    spread = float(hi - lo)
+    with np.errstate(over="ignore", invalid="ignore"):
+        lo, mid, hi = np.percentile(x, [1.0, 50.0, 99.0])
+        spread = float(hi - lo)
+    if not np.isfinite(spread):  # so many of them that the range itself overflows
+        return Flag("corrupt_values", f"values up to {float(np.max(np.abs(x))):.3g} in more than 1 % of "
+                    "the window: too large to process, corrupt values, not a signal")
     if spread <= 0.0:
         return None
     with np.errstate(over="ignore"):

@@ -82,6 +82,10 @@ def test_a_corrupt_sample_flags_only_windows_that_hold_it_and_says_so(mitdb, val
     spike = mitdb.x[: 60 * FS].copy()
     spike[30 * FS] = 50.0  # a big artefact, 30 times the range: processed
     assert features(spike).ok
+    many = mitdb.x[: 20 * FS].copy()
+    many[::20] = 1e308 * (-1.0) ** np.arange(many[::20].shape[0])  # 5 %, both signs: the range overflows
+    (flag,) = check_values(many, FS, 2.0, 0.01)
+    assert flag.code == "corrupt_values" and "up to 1e+308" in flag.reason, flag
 
 
 def test_real_quantised_ecg_is_not_flagged_saturated(mitdb) -> None:
