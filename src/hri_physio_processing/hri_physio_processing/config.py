@@ -76,9 +76,10 @@ class ProcessorConfig(NodeConfig):
                                        "end", unit="s", ge=0)
     dedup_seconds: float = option(0.0, "peaks closer than this to the last published one are duplicates "
                                   "(0 = mode default: 0.2 s ECG/PPG, 1 s EDA)", unit="s", ge=0)
-    ecg_polarity: Literal["auto", "upright", "inverted"] = option(
-        "auto", "ECG: turn the signal over when its R waves point down (strap upside down, electrodes "
-        "swapped): auto decides each window by its dominant deflection; upright / inverted fix it")
+    polarity: Literal["auto", "upright", "inverted"] = option(
+        "auto", "which way up the signal is: auto turns an ECG window over when its R waves point down "
+        "(strap upside down, electrodes swapped) and takes PPG and EDA as they come; inverted turns "
+        "every window over (a Polar OH1 / Verity Sense sends its raw PPG upside down); upright never")
     correct_artifacts: bool = option(False, "let NeuroKit2 correct R-peak artefacts "
                                      "(ecg_peaks correct_artifacts)")
     max_beat_gap_seconds: float = option(2.0, "an interval between beats longer than this is a beat-free "

@@ -79,7 +79,7 @@ class FeatureSettings:
     min_regular_fraction: float = 0.8  # fewer regular intervals: rate and HRV NaN
     hrv_spectrum: str = "welch"  # or "lomb" (hrv.band_powers)
     frequency_domain: bool = True  # LF, HF, LF/HF on the window itself (off: the caller's long window)
-    ecg_polarity: str = "auto"  # "auto" (each window by its dominant deflection), "upright", "inverted"
+    polarity: str = "auto"  # "auto" (ECG: each window by its dominant deflection), "upright", "inverted"
     ecg_inverted_when_unclear: bool = False  # auto, a window with no clear polarity: the last clear one
 
     @property
@@ -184,13 +184,13 @@ def detect(x: np.ndarray, cfg: FeatureSettings,
         warnings.simplefilter("ignore")
         if cfg.mode == "ecg":
             clean = np.asarray(nk.ecg_clean(x, sampling_rate=fs), dtype=np.float64)
-            polarity = cfg.ecg_polarity if inverted is None else ("inverted" if inverted else "upright")
+            polarity = cfg.polarity if inverted is None else ("inverted" if inverted else "upright")
             clean, _, _ = upright_ecg(clean, float(cfg.sampling_rate), polarity,
                                       cfg.ecg_inverted_when_unclear)
             _, info = nk.ecg_peaks(clean, sampling_rate=fs, correct_artifacts=cfg.correct_artifacts)
             return clean, np.asarray(info["ECG_R_Peaks"], dtype=np.int64)
         if cfg.mode == "ppg":
-            signals, info = nk.ppg_process(x, sampling_rate=fs)
+            signals, info = nk.ppg_process(-x if cfg.polarity == "inverted" else x, sampling_rate=fs)
             peaks = np.asarray(info["PPG_Peaks"], dtype=np.int64)
             return signals["PPG_Clean"].to_numpy(dtype=np.float64), peaks
         signals, info = nk.eda_process(x, sampling_rate=fs)
@@ -243,7 +243,7 @@ def _ecg(x: np.ndarray, cfg: FeatureSettings) -> WindowResult:
 
     fs = cfg.nk_rate
     clean = np.asarray(nk.ecg_clean(x, sampling_rate=fs), dtype=np.float64)
-    clean, inverted, clear = upright_ecg(clean, float(cfg.sampling_rate), cfg.ecg_polarity,
+    clean, inverted, clear = upright_ecg(clean, float(cfg.sampling_rate), cfg.polarity,
                                          cfg.ecg_inverted_when_unclear)
     _, info = nk.ecg_peaks(clean, sampling_rate=fs, correct_artifacts=cfg.correct_artifacts)
     peaks = np.asarray(info["ECG_R_Peaks"], dtype=np.int64)
@@ -265,7 +265,8 @@ def _ecg(x: np.ndarray, cfg: FeatureSettings) -> WindowResult:
 def _ppg(x: np.ndarray, cfg: FeatureSettings) -> WindowResult:
     import neurokit2 as nk
 
-    signals, info = nk.ppg_process(x, sampling_rate=cfg.nk_rate)
+    inverted = cfg.polarity == "inverted"  # no reliable cue in a PPG window itself: the user says so
+    signals, info = nk.ppg_process(-x if inverted else x, sampling_rate=cfg.nk_rate)
     clean = signals["PPG_Clean"].to_numpy(dtype=np.float64)
     peaks = np.asarray(info["PPG_Peaks"], dtype=np.int64)
 
@@ -274,7 +275,9 @@ def _ppg(x: np.ndarray, cfg: FeatureSettings) -> WindowResult:
             return math.nan
         return float(signals["PPG_Quality"].mean())
 
-    return _heart(clean, peaks, quality, cfg)
+    res = _heart(clean, peaks, quality, cfg)
+    res.inverted = inverted
+    return res
 
 
 def _heart(clean: np.ndarray, peaks: np.ndarray, quality: Callable[[], float],

@@ -87,7 +87,7 @@ class _View:
 class ProcessorStats:
     windows: int = 0
     flagged_windows: int = 0
-    inverted_windows: int = 0  # ECG windows turned over before peak detection (ecg_polarity)
+    inverted_windows: int = 0  # ECG/PPG windows turned over before peak detection (polarity)
     published_peaks: int = 0
     duplicate_peaks: int = 0
     gaps: int = 0
@@ -453,7 +453,7 @@ class NeurokitProcessor:
             "features": {k: (v if math.isfinite(v) else None) for k, v in res.scalars.items()},
             "peaks_in_window": int(res.peaks.shape[0]),
             "beats": dict(res.beats),
-            **({"ecg_inverted": res.inverted} if self.cfg.mode == "ecg" else {}),
+            **({"inverted": res.inverted} if self.cfg.mode in ("ecg", "ppg") else {}),
             **({"hrv_method": hrv.METHODS[self.settings.hrv_spectrum]} if "lf" in SCALARS[self.cfg.mode]
                else {}),
             "peaks_published": int(peaks.shape[0]),

@@ -250,7 +250,7 @@ def _signal_quality(tables: BagTables, timeline: Timeline, clock: SessionClock) 
                 flags[str(f.get("code") or f.get("reason")) if isinstance(f, dict) else str(f)] += 1
         processor[topic] = {
             "windows": len(windows), "windows_flagged": sum(1 for w in windows if not w.get("ok", True)),
-            "windows_inverted": sum(1 for w in windows if w.get("ecg_inverted")),
+            "windows_inverted": sum(1 for w in windows if w.get("inverted")),
             "flags": dict(flags), "discontinuities": len(discontinuities),
             "missing_samples_reported": int(sum(int(d.get("missing_samples") or 0) for d in discontinuities)),
         }

@@ -130,7 +130,7 @@ def render(report: dict[str, Any], figures: dict[str, Path], configs: dict[str, 
         parts.append(_table(["Rule update not run because", "Count"],
                             sorted(sq["rule_updates_gated"].items())))
     if sq.get("processor"):
-        parts.append(_table(["Processor status", "Windows", "Flagged", "ECG turned over", "Flags",
+        parts.append(_table(["Processor status", "Windows", "Flagged", "Turned over", "Flags",
                              "Discontinuities", "Missing samples reported"],
                             [[t, v["windows"], v["windows_flagged"], v.get("windows_inverted", 0), v["flags"],
                               v["discontinuities"], v["missing_samples_reported"]]

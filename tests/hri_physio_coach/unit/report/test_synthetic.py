@@ -122,7 +122,7 @@ def session(*, clock: bool = True, stop_at: float | None = None, policy: str = "
             for feature, value in (("lf", 400.0 + j), ("hf", 300.0 + j), ("lfhf", math.nan)):
                 b.add(f"{topics.POLAR_H10_ECG}/{feature}", "std_msgs/msg/Float64MultiArray", wall(t + 40),
                       frame_msg(np.array([1000.0 + t]), np.array([value]), (feature,)))
-            status = {"t": 1000.0 + t, "event": "window", "ok": True, "flags": [], "ecg_inverted": j >= 2,
+            status = {"t": 1000.0 + t, "event": "window", "ok": True, "flags": [], "inverted": j >= 2,
                       "nan": {"lfhf": "window 60 s shorter than the 300 s LFHF needs"},
                       "hrv_window": {"t_start": 1000.0, "t_end": 1000.0 + t, "seconds": t, "beats": 80},
                       "hrv_method": "Task Force (1996): Welch, LF 0.04-0.15 Hz and HF 0.15-0.40 Hz in ms^2"}
@@ -167,7 +167,7 @@ def test_adaptations_behaviours_and_signal_quality(full) -> None:
     assert sq["rule_updates_gated"] == {"no heart-rate data for N s": 1}
     processor = sq["processor"][f"{topics.POLAR_H10_ECG}/status"]
     assert (processor["windows"], processor["windows_flagged"], processor["windows_inverted"]) == (4, 0, 2)
-    assert "ECG turned over" in full.files["report_html"].read_text()
+    assert "Turned over" in full.files["report_html"].read_text()
 
 
 def test_samples_expected_vs_received_per_stream(full) -> None:

@@ -1,8 +1,9 @@
 """An ECG upside down (strap worn the wrong way round, electrodes swapped): the processor turns it over.
 
 With the R waves pointing down the peak detector times other waves of the beat: on a real Polar H10
-recording turned over, RMSSD came out 63 ms instead of 6, with a quality that passed. ``ecg_polarity``
-``auto`` (the default) decides each window by its dominant deflection.
+recording turned over, RMSSD came out 63 ms instead of 6, with a quality that passed. ``polarity``
+``auto`` (the default) decides each ECG window by its dominant deflection; raw PPG from a Polar OH1 or
+Verity Sense comes upside down and is processed with ``polarity: inverted``.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import numpy as np
 import pytest
 
 from helpers.processing import match_beats, published_peaks, random_chunks, run_processor, statuses
+from helpers.recordings import heartpy_ppg
 from hri_physio_processing.config import ConfigError, ProcessorConfig
 from hri_physio_processing.features import FeatureSettings, extract, upright_ecg
 
@@ -61,7 +63,7 @@ def test_an_inverted_window_gives_the_upright_features(mitdb, seconds: int) -> N
             math.isnan(value) and math.isnan(down.scalars[key])), key
     np.testing.assert_array_equal(down.peaks, up.peaks)
     # Without the turn the same window is timed on other waves: the beats move.
-    kept = extract(t, -x, FeatureSettings(ecg_polarity="upright"))
+    kept = extract(t, -x, FeatureSettings(polarity="upright"))
     assert not kept.inverted
     assert kept.peaks.shape != up.peaks.shape or not np.array_equal(kept.peaks, up.peaks)
 
@@ -72,7 +74,7 @@ def test_the_processor_finds_every_reference_beat_in_an_inverted_record(mitdb) -
     t, x = mitdb.t[:n], -mitdb.x[:n]
     proc, out = run_processor(cfg, t, x, random_chunks(n, np.random.default_rng(4), 1, 1000))
     wins = statuses(out)
-    assert wins and all(w["ok"] and w["ecg_inverted"] for w in wins)
+    assert wins and all(w["ok"] and w["inverted"] for w in wins)
     assert proc.stats.inverted_windows == len(wins)
     assert proc.settings.ecg_inverted_when_unclear  # remembered for windows that cannot tell
     reference = mitdb.beats[mitdb.beats < t[-1] - 1.0]
@@ -83,10 +85,26 @@ def test_the_processor_finds_every_reference_beat_in_an_inverted_record(mitdb) -
     # The lead-in before each window is turned over as its window is: the same beats as upright.
     _, upright_out = run_processor(cfg, t, -x, random_chunks(n, np.random.default_rng(4), 1, 1000))
     np.testing.assert_array_equal(detected, published_peaks(upright_out))
-    assert not any(w["ecg_inverted"] for w in statuses(upright_out))
+    assert not any(w["inverted"] for w in statuses(upright_out))
 
 
 def test_a_polarity_that_is_not_one_of_the_three_is_refused() -> None:
-    with pytest.raises(ConfigError, match="ecg_polarity"):
-        ProcessorConfig.from_mapping({"ecg_polarity": "down"})
-    assert ProcessorConfig.from_mapping({"ecg_polarity": "inverted"}).features.ecg_polarity == "inverted"
+    with pytest.raises(ConfigError, match="polarity"):
+        ProcessorConfig.from_mapping({"polarity": "down"})
+    assert ProcessorConfig.from_mapping({"polarity": "inverted"}).features.polarity == "inverted"
+
+
+def test_ppg_upside_down_is_processed_as_upright_when_the_user_says_so() -> None:
+    """Raw PPG from a Polar OH1 / Verity Sense comes upside down: polarity inverted turns it over
+    (real finger PPG, heartpy's data3, turned over here); auto takes PPG as it comes."""
+    ppg = heartpy_ppg("data3")
+    sel = slice(int(240 * ppg.fs), int(300 * ppg.fs))
+    x = ppg.x[sel]
+    t = np.arange(x.shape[0]) / ppg.fs
+    up = extract(t, x, FeatureSettings(mode="ppg", sampling_rate=ppg.fs))
+    turned = extract(t, -x, FeatureSettings(mode="ppg", sampling_rate=ppg.fs, polarity="inverted"))
+    assert up.ok and not up.inverted and turned.inverted
+    np.testing.assert_array_equal(turned.peaks, up.peaks)
+    assert turned.scalars["hr"] == pytest.approx(up.scalars["hr"], rel=1e-12)
+    as_it_comes = extract(t, -x, FeatureSettings(mode="ppg", sampling_rate=ppg.fs))
+    assert not as_it_comes.inverted and not np.array_equal(as_it_comes.peaks, up.peaks)
