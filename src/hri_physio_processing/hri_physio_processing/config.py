@@ -78,8 +78,9 @@ class ProcessorConfig(NodeConfig):
                                   "(0 = mode default: 0.2 s ECG/PPG, 1 s EDA)", unit="s", ge=0)
     polarity: Literal["auto", "upright", "inverted"] = option(
         "auto", "which way up the signal is: auto turns an ECG window over when its R waves point down "
-        "(strap upside down, electrodes swapped) and takes PPG and EDA as they come; inverted turns "
-        "every window over (a Polar OH1 / Verity Sense sends its raw PPG upside down); upright never")
+        "(strap upside down, electrodes swapped) and takes PPG as it comes; inverted turns every ECG "
+        "or PPG window over (a Polar OH1 / Verity Sense sends its raw PPG upside down); upright "
+        "never (EDA is always taken as it comes)")
     correct_artifacts: bool = option(False, "let NeuroKit2 correct R-peak artefacts "
                                      "(ecg_peaks correct_artifacts)")
     max_beat_gap_seconds: float = option(2.0, "an interval between beats longer than this is a beat-free "
