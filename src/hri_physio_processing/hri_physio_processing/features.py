@@ -216,9 +216,10 @@ def upright_ecg(clean: np.ndarray, fs: float, polarity: str = "auto",
     A strap worn upside down, or electrodes swapped, gives an ECG whose R waves point down: the peak
     detector then times other waves of the beat, and HRV comes out several times too high with a
     quality that passes (a real H10 recording turned over: RMSSD 63 ms instead of 6). ``auto`` takes,
-    in each 2-s block, the sample farthest from the mean (NeuroKit2's ``ecg_invert`` rule, on the
-    already cleaned signal: cleaning is linear, so this costs no second pass) and turns the signal
-    over when at least :data:`POLARITY_CLEAR_SHARE` of them are negative. Short of that either way
+    in each 2-s block, the sample farthest from the mean (the deflections NeuroKit2's ``ecg_invert``
+    looks at, on the already cleaned signal: cleaning is linear, so this costs no second pass) and
+    turns the signal over when at least :data:`POLARITY_CLEAR_SHARE` of them are negative (NeuroKit2
+    turns at half, which turns noise over too). Short of that either way
     (noise, a stretch of artefacts) the window is not clear and ``inverted_when_unclear`` decides:
     the polarity of the stream so far, which a strap keeps. A lead whose S wave is deeper than its R
     is timed on the S wave, which beats as regularly. ``upright`` / ``inverted`` fix the polarity.
