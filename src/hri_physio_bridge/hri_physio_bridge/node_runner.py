@@ -371,9 +371,8 @@ def run_node(
         spinner = ExecutorThread(node, on_error=stop_after_a_failed_callback)
         code = node.run(stop)
         if spinner.error is not None:
-            error = spinner.error
-            first = (str(error).strip().splitlines() or [""])[0]
-            what = f"{type(error).__name__}: {first}" if first else type(error).__name__
+            error, kind = spinner.error, type(spinner.error).__name__
+            what = f"{kind}: {one_line(error)}" if str(error).strip() else kind
             print(f"{prog}: error: a callback failed ({what}); the node stopped", file=sys.stderr, flush=True)
             code = 1
     finally:
