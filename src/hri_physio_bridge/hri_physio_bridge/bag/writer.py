@@ -23,6 +23,7 @@ is recovered by :mod:`hri_physio_bridge.bag.recovery`.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 import time
@@ -299,9 +300,11 @@ class BagWriter:
             if self._closed:
                 return
             self._closed = True
-            if self._file is not None:
-                self._file.close()
-                self._file = None
+            file, self._file = self._file, None
+            if file is not None:
+                # A disk that refuses the buffered tail leaves what a crash leaves; the caller said why.
+                with contextlib.suppress(OSError):
+                    file.close()
 
     @property
     def closed(self) -> bool:

@@ -229,7 +229,7 @@ class RecorderNode(ManagedNode):
                 ready = self.arrivals.wait(self.subs, 1.0 if due is None else min(due, 1.0))
             code = self._drain_at_stop()
         except (BagError, OSError) as exc:
-            log.error(f"recording failed: {exc}")
+            log.error(f"recording failed: {exc}; nothing after this is recorded ({writer.bag_dir})")
             code = 1
         return self._close_bag() or code
 
@@ -257,6 +257,9 @@ class RecorderNode(ManagedNode):
             self.session.finish()
             info = self.writer.close()
         except (BagError, OSError) as exc:
+            # A full disk refuses the summary too: leave the file as a crash would (said once, not again
+            # at the node's close), for --repair to recover what reached the disk.
+            self.writer.abort()
             log.error(f"could not close the bag: {exc}; run '{PROG} --repair {self.writer.bag_dir}'")
             return 1
         log.info(

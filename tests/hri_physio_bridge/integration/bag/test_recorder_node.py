@@ -291,3 +291,50 @@ def test_messages_queued_at_the_stop_are_recorded(tmp_path: Path, prefix: str, n
         time.sleep(0.3)  # delivered to the recorder's queue, not yet taken
         assert rec.stop(signal.SIGINT) == 0, rec.output
     assert [int(m.data) for _, _, m in read_with_rosbags(bag)] == list(range(50))
+
+
+#: Runs a console script with a file-size limit (RLIMIT_FSIZE), then execs it: the bag's writes fail
+#: past the limit as they would on a full disk (EFBIG here, ENOSPC there; Python ignores SIGXFSZ).
+_FILE_SIZE_LIMITED = (sys.executable, "-c", "import os, resource, sys; "
+                      "resource.setrlimit(resource.RLIMIT_FSIZE, (int(sys.argv[1]), int(sys.argv[1]))); "
+                      "os.execv(sys.argv[2], sys.argv[2:])")
+
+
+def test_a_disk_that_refuses_writes_ends_the_recording_clearly_and_repair_keeps_what_reached_it(
+        tmp_path: Path, prefix: str, node) -> None:
+    """Past the limit the recorder says why it stopped, once, exits 1, and --repair recovers every
+    message flushed before (0, 1, 2, ... in order); the file-size limit stands in for a full disk."""
+    import os
+
+    limit = 400_000
+    topic, bag = f"{prefix}/count", tmp_path / "full"
+    pub = node.create_publisher(String, topic, 1000)
+    rec = NodeProcess("recorder", topic, "-o", str(bag), "--discovery-period", "0.2", "--flush-period", "0.2",
+                      prefix=(*_FILE_SIZE_LIMITED, str(limit)))
+    with rec:
+        _wait_recorded(rec, pub, topic)
+        sent = 0
+        deadline = time.monotonic() + 60
+        while rec.proc.poll() is None and time.monotonic() < deadline:
+            # Random text (about 2 kB a message) so that compression cannot keep it under the limit.
+            pub.publish(String(data=f"{sent} {os.urandom(1000).hex()}"))
+            sent += 1
+            time.sleep(0.005)
+        code = rec.proc.wait(30)
+    lines = own_lines(rec.output)
+    out = "\n".join(lines)
+    assert code == 1, out
+    assert sent * 2000 > limit  # the limit was reached, not the deadline
+    failed = [line for line in lines if "recording failed:" in line]
+    assert len(failed) == 1 and "File too large" in failed[0], failed
+    assert "nothing after this is recorded" in failed[0]
+    assert out.count("could not close the bag") == 1 and f"--repair {bag}" in out
+    assert not (bag / "metadata.yaml").exists()
+
+    exe = str(Path(sys.prefix) / "bin")
+    fix = subprocess.run([f"{exe}/recorder", "--repair", str(bag)], capture_output=True, text=True,
+                         timeout=60)
+    assert fix.returncode == 0, fix.stderr
+    values = [int(m.data.split()[0]) for _, _, m in read_with_rosbags(bag)]
+    assert len(values) > 50 and values == list(range(len(values))), values[:5]
+    assert check_bag(bag)["message_count"] == len(values)
