@@ -16,6 +16,7 @@ from pydantic import field_validator, model_validator
 from hri_physio_bridge.config import NodeConfig, option
 from hri_physio_bringup.live import DEFAULT_LIVE, parse_live
 from hri_physio_coach.config import PolicyName
+from hri_physio_coach.participant.models import MODEL_NAMES
 
 PROG = "hri_physio_session"
 #: ``--source`` values: the simulated participant, a real strap, or a capture of one replayed.
@@ -33,6 +34,9 @@ class SessionConfig(NodeConfig):
     age: float = option(33.0, "the simulated participant's age, also the coach's part_age", unit="years",
                         gt=0, le=120)
     participant_seed: int = option(1, "seed of the simulated participant's variability", ge=0)
+    participant_model: str = option("standard", f"the simulated participant's heart: a participant model "
+                                    f"({', '.join(MODEL_NAMES)}; docs/PARTICIPANT_MODEL.md), as "
+                                    f"hri_physio_evaluate --model")
     hr_source: Literal["strap", "ecg"] = option("strap", "the coach's heart rate: the strap's HR or the "
                                                 "processor's HR from ECG")
     conf: str = option("", "the coach's YAML file ('' = the packaged coach.yaml)")
@@ -123,6 +127,9 @@ class SessionConfig(NodeConfig):
                 raise ValueError(f"{name}: {path} does not exist")
         if self.hr_source == "ecg" and self.no_ecg:
             raise ValueError("hr_source ecg needs the ECG path: drop --no-ecg")
+        if self.participant_model not in MODEL_NAMES:
+            raise ValueError(f"participant_model: unknown participant model {self.participant_model!r}; "
+                             f"choose from {', '.join(MODEL_NAMES)}")
         if self.device_id and not self.device_id.replace("-", "").replace("_", "").isalnum():
             raise ValueError(f"device_id may hold letters, digits, '-' and '_' only, got {self.device_id!r}")
         self._check_source()
@@ -145,6 +152,9 @@ class SessionConfig(NodeConfig):
         if self.device_id:
             raise ValueError("device_id names the simulated strap: with a Polar source the id is "
                              "polar:<device id>")
+        if self.participant_model != "standard":
+            raise ValueError(f"participant_model {self.participant_model} is the simulated participant's: "
+                             f"with source {self.source} the heart is the strap wearer's")
         if self.source.startswith(POLAR):
             if not re.fullmatch(r"[0-9A-Fa-f]{8}", self.polar_device):
                 raise ValueError(f"source polar:<device id>: give the strap's 8-hex-digit id (printed on it, "

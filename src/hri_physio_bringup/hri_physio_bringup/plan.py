@@ -181,7 +181,8 @@ def heart_rate_node(options: SessionConfig, device_id: str) -> NodeLaunch:
     if not options.polar:
         return NodeLaunch(PARTICIPANT, "simulated_participant", PARTICIPANT,
                           _validated(ParticipantNodeConfig, PARTICIPANT, {
-                              "age": options.age, "seed": options.participant_seed, "device_id": device_id,
+                              "model": options.participant_model, "age": options.age,
+                              "seed": options.participant_seed, "device_id": device_id,
                               "update_period": CLOCK_STEP}), ("--ros-args", *SIM_TIME))
     streams = ["hr", "rr"] if options.no_ecg else ["ecg", "hr", "rr"]  # rr: on LSL for the lab's own tools
     values: dict[str, Any] = {"streams": streams}

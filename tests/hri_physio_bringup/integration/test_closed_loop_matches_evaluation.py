@@ -7,7 +7,8 @@ follows) under sim time; its coach events are read back from the session's bag. 
 session folder's ``configs/`` (the participant's model parameters and seed, the coach's options and
 seed) and, from the bag, when the participant's seeded model took over after the coach's
 ``session_start`` (a closed loop hands over on the strap's next fitting second; the evaluation's
-``model_start``). The participant is the demo's: age 33, participant seed 1.
+``model_start``). The participant is the demo's: age 33, participant seed 1, once with the standard
+participant model and once with another (``--participant-model``): the node runs the evaluation's models.
 
 Stated tolerance: the two make the same control changes (action, ladder step, activity cost, in order)
 at the same rule update (``TOLERANCE_S``), every rule update averages the same number of samples to
@@ -58,6 +59,8 @@ pytestmark = [pytest.mark.ros, pytest.mark.lsl, pytest.mark.session]
 POLICY = "predictive"
 AGE = 33.0
 PARTICIPANT_SEED = 1
+#: The session's participant models: the default and one whose heart is built otherwise.
+MODELS = ("standard", "vagal")
 #: Sim speed: a command and the music's new tempo must reach the participant within 3.5 s of sim time
 #: (its 5-s marks less the 1.5 s it takes an instruction in), and heart rate the coach within its
 #: hr_wait (3 s). The launcher's clock guard slows sim time down while heart rate, a command's answer
@@ -107,25 +110,29 @@ def evaluated(folder: Path, policy: str = POLICY, age: float | None = None) -> l
     return simulate_session(spec, coach).events
 
 
-@pytest.fixture(scope="module")
-def session(tmp_path_factory: pytest.TempPathFactory, session_tag: str) -> Path:
-    out = tmp_path_factory.mktemp("closed_loop")
+@pytest.fixture(scope="module", params=MODELS)
+def session(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory,
+            session_tag: str) -> Path:
+    out = tmp_path_factory.mktemp(f"closed_loop_{request.param}")
     command = [str(Path(sys.prefix) / "bin" / "hri_physio_session"), *short_routine(out, ROUTINE),
-               "--policy", POLICY,
+               "--policy", POLICY, "--participant-model", request.param,
                "--speed", f"{SPEED:g}", "--no-ecg", "--no-report", "--age", f"{AGE:g}",
                "--participant-seed", str(PARTICIPANT_SEED),
-               "--device-id", f"SIM{session_tag}e2e", "--out", str(out)]
+               "--device-id", f"SIM{session_tag}e2e{request.param[:3]}", "--out", str(out)]
     run = run_to_end(command, timeout=400, cwd=out, env=session_env())
     assert run.returncode == 0, failed_nodes_logs(run.stdout, out)
     (folder,) = [p for p in out.iterdir() if p.is_dir()]  # the session's
     summary = json.loads((folder / "summary.json").read_text())
     assert summary["outcome"] == "finished", run.stdout
+    assert summary["options"]["participant_model"] == request.param
     return folder
 
 
 def test_the_evaluation_runs_the_participant_and_coach_that_ran(session: Path) -> None:
     spec, coach = evaluation_spec(session)
     assert (spec.params.age, spec.participant_seed, spec.policy) == (AGE, PARTICIPANT_SEED, POLICY)
+    model = json.loads((session / "summary.json").read_text())["options"]["participant_model"]
+    assert spec.params.model == model  # the evaluation simulates the heart the node simulated
     assert coach.seed == spec.coach_seed
 
 

@@ -72,6 +72,9 @@ def test_the_session_sets_the_nodes_to_fit_together(tmp_path: Path) -> None:
     assert coach.interactive and coach.part_age == 45.0 and coach.hr_topic == topics.POLAR_H10_HR
     assert "use_sim_time:=true" in p.node(COACH).extra
     assert p.node(RECORDER).extra == () and p.node(PROCESSOR).extra == ()  # on wall time
+    assert participant.model == "standard"
+    vagal = plan(tmp_path, participant_model="vagal")[0].node(PARTICIPANT).config
+    assert vagal.model == "vagal" and vagal.params.model == "vagal" and vagal.age == 33.0
     p, _ = plan(tmp_path, no_record=True, hr_source="ecg", log_data=True)
     hr = p.node(HR_RECEIVER).config
     assert hr.min_consumers == 2 and hr.log_data and hr.log_name.endswith("csv/hr.csv")
@@ -119,6 +122,8 @@ def test_an_invalid_coach_or_routine_is_found_before_anything_starts(tmp_path: P
     ({"speed": 0}, "speed"), ({"age": 150}, "age"), ({"conf": "/nonexistent/coach.yaml"}, "does not exist"),
     ({"hr_source": "ecg", "no_ecg": True}, "needs the ECG path"), ({"device_id": "SIM 1"}, "device_id"),
     ({"policy": "bogus"}, "policy"), ({"startup_timeout": -1}, "startup_timeout"),
+    ({"participant_model": "athlete"}, "participant_model: unknown participant model 'athlete'; choose from "
+                                       "standard, vagal, vo2drive"),
 ])
 def test_bad_session_options_name_the_option(options: dict, match: str) -> None:
     with pytest.raises(ConfigError, match=match):
@@ -201,6 +206,7 @@ def test_a_replayed_capture_stands_in_for_the_strap(tmp_path: Path) -> None:
     ({"source": "polar-replay:/nonexistent.jsonl"}, "does not exist"),
     ({"source": "lsl:x"}, "source must be simulated"),
     ({"source": "polar:A1B2C3D4", "device_id": "SIM1"}, "device_id"),
+    ({"source": "polar:A1B2C3D4", "participant_model": "vagal"}, "the heart is the strap wearer's"),
 ])
 def test_bad_sources_are_one_clear_error(options: dict, message: str) -> None:
     with pytest.raises(ConfigError, match=message):
