@@ -94,7 +94,10 @@ def load_population(path: str | Path, model: str = "standard") -> list[Participa
         raise PopulationError(f"population file {p} has no rows (a header line, then one person per line)")
     unknown = sorted(set(columns) - set(fields))
     if unknown:
-        raise PopulationError(f"population file {p}: unknown column(s) {', '.join(unknown)}; "
+        separators = ((";", "semicolons"), ("\t", "tabs"))
+        separator = next((name for sep, name in separators if sep in columns[0]), None)
+        hint = f" (its header is split by {separator}: columns are separated by commas)" if separator else ""
+        raise PopulationError(f"population file {p}: unknown column(s) {', '.join(unknown)}{hint}; "
                               f"known: {', '.join(fields)}")
     people = []
     for i, row in enumerate(rows, start=2):

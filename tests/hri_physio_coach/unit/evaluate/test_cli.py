@@ -93,6 +93,8 @@ def test_unwritable_out_dir(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     ("", "no rows"),
     ("age,hr_rest\n", "no rows"),
     ("age,shoe_size\n30,42\n", "shoe_size"),
+    ("age;hr_rest\n30;60\n", "split by semicolons: columns are separated by commas"),
+    ("age\thr_rest\n30\t60\n", "split by tabs"),
     ("age,hr_rest\n30,fast\n", "hr_rest must be a number"),
     ("age,hr_rest\n30,\n", "needs a value"),
     ("age,hr_rest,hr_max_true\n30,200,180\n", "hr_rest < hr_max_true"),
