@@ -681,7 +681,8 @@ def run_session(options: SessionConfig, plan: SessionPlan, folder: SessionFolder
             if clock.held_wall >= 1.0:
                 causes = ", ".join(f"{cause} {n}" for cause, n in sorted(guard.holds.items()))
                 console.say(f"[session] the clock waited {clock.held_wall:.1f} s of wall time for the loop "
-                            f"(holds: {causes}): the machine was busy; what ran is as at full speed")
+                            f"(holds: {causes}): the nodes could not keep up with {clock.speed:g}x here "
+                            f"(a busy machine, or more speed than it has); what ran is as at full speed")
 
 
 def _write_report(folder: SessionFolder) -> list[str]:

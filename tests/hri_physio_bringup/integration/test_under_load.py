@@ -49,6 +49,9 @@ def test_a_session_with_both_cores_busy_ends_cleanly_with_nothing_lost(
     summary = json.loads((folder / "summary.json").read_text())
     assert (summary["outcome"], summary["exit_status"], summary["restarts"]) == ("finished", 0, []), summary
     assert all(node["exit_status"] == 0 for node in summary["nodes"].values()), summary["nodes"]
+    held = summary["clock"]["held_wall_s"]
+    # The console says when the clock waited for the loop (a second of wall time or more), and why.
+    assert (f"the nodes could not keep up with {SPEED}x here" in out) == (held >= 1.0), (held, out[-2000:])
     assert (folder / "report.json").is_file() and (folder / "report.html").stat().st_size > 0
     bag = bag_messages(folder / "bag")
     receivers = summary["session"]["receivers"]
