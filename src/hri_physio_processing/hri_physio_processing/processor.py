@@ -254,9 +254,15 @@ class NeurokitProcessor:
             )
         if bad_times:
             reasons.append(f"{bad_times} sample(s) dropped: their timestamp is NaN or infinite")
-        if cuts >= 10 and discarded:
-            reasons.append("timestamps keep jumping: is sampling_rate "
-                           f"({self.fs:g} Hz) right for this stream?")
+        # Since the start, as one report (a hop's worth) may hold only a few of a stream's cuts.
+        if now.gaps + now.clock_jumps >= 10 and discarded:
+            if now.clock_jumps and now.missing_samples <= 3 * now.gaps:  # small steps both ways: jitter
+                reasons.append("timestamps step a few samples forward and back: does the source stamp "
+                               "each chunk when it arrives? The receiver can smooth them (its input "
+                               "lsl:<stream>?dejitter=1)")
+            else:
+                reasons.append("timestamps keep jumping: is sampling_rate "
+                               f"({self.fs:g} Hz) right for this stream?")
         payload = {
             "t": p.t_last, "event": "discontinuity", "mode": self.cfg.mode, "ok": False,
             "gaps": gaps, "missing_samples": missing, "backward_steps": backward,

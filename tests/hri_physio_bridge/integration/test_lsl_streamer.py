@@ -196,3 +196,53 @@ def test_time_correction_is_applied_with_sync_and_reported_either_way(lsl_name: 
         assert abs(correction["offset_s"]) < 0.05 and correction["span_s"] >= 0
     finally:
         rx.stop()
+
+
+def _arrival_stamped(n_chunks: int, per_chunk: int, seed: int) -> np.ndarray:
+    """Stamps of a source that stamps each chunk on arrival: the chunk's last sample gets the arrival
+    time (its true time plus 0-25 ms of BLE delay), the others are counted back at the nominal rate."""
+    jitter = np.random.default_rng(seed).uniform(0.0, 0.025, n_chunks)
+    last = 5000.0 + (np.arange(n_chunks) + 1) * per_chunk / RATE + jitter
+    return (last[:, None] - (per_chunk - 1 - np.arange(per_chunk))[None, :] / RATE).reshape(-1)
+
+
+@pytest.mark.parametrize("dejitter", [False, True])
+def test_dejitter_smooths_a_source_that_stamps_chunks_on_arrival(lsl_name: str, dejitter: bool) -> None:
+    """``?dejitter=1``: liblsl's dejitter turns arrival-stamped chunks (every boundary a step a few ms
+    forward or back) into stamps the processor's windows accept (no gap, no clock jump), each within
+    the jitter of its true time; without it the stamps are kept as sent and the windows are cut."""
+    from hri_physio_processing.windowing import Window, WindowAccumulator
+
+    per_chunk, n_chunks = 73, 40  # a Polar H10's ECG notification; 22 s
+    stamps = _arrival_stamped(n_chunks, per_chunk, seed=3)
+    outlet = pylsl.StreamOutlet(pylsl.StreamInfo(lsl_name, "ECG", 1, RATE, pylsl.cf_double64, lsl_name))
+    address = f"{lsl_name}?dejitter=1" if dejitter else lsl_name
+    source = LslStreamer(address)
+    assert source.dejitters is dejitter
+    source.open_input(timeout=20.0)
+    try:
+        wait_until(outlet.have_consumers, 20, "the inlet")
+        n = per_chunk * n_chunks
+        for c in range(n_chunks):
+            chunk = slice(c * per_chunk, (c + 1) * per_chunk)
+            outlet.push_chunk([[float(i)] for i in range(n)[chunk]], timestamp=stamps[chunk].tolist())
+        got_t: list[float] = []
+        got_v: list[float] = []
+        deadline = time.monotonic() + 20
+        while len(got_t) < n and time.monotonic() < deadline:
+            frame = source.receive(timeout=0.2)
+            if frame is not None:
+                got_t.extend(frame.timestamps.tolist())
+                got_v.extend(frame.values[:, 0].tolist())
+    finally:
+        source.close()
+    assert got_v == [float(i) for i in range(n)]  # every sample, in order, whatever the stamps
+    windows = WindowAccumulator(window=int(10 * RATE), hop=int(RATE), sampling_rate=RATE)
+    cuts = [e for e in windows.push(np.array(got_t), np.array(got_v)) if not isinstance(e, Window)]
+    true_times = 5000.0 + (np.arange(n) + 1) / RATE
+    if dejitter:
+        assert cuts == []
+        assert np.max(np.abs(np.array(got_t) - true_times)) < 0.03
+    else:
+        np.testing.assert_array_equal(np.array(got_t), stamps)  # kept as sent
+        assert len(cuts) >= n_chunks // 4  # chunk boundaries read as gaps or clock jumps

@@ -205,6 +205,21 @@ def test_far_too_slow_stream_reports_discontinuities_rate_limited() -> None:
     assert proc.stats.gaps == 1999
 
 
+def test_arrival_stamped_chunks_are_reported_with_the_receivers_dejitter_as_the_way_out() -> None:
+    """A source that stamps each 73-sample chunk on arrival: every boundary steps a few ms forward or
+    back, so no window fills; the report says what it looks like and what smooths it."""
+    x = ecg(40.0)
+    per_chunk = 73
+    n = len(x) // per_chunk * per_chunk
+    jitter = np.random.default_rng(2).uniform(0.0, 0.025, n // per_chunk)
+    last = (np.arange(n // per_chunk) + 1) * per_chunk / FS + jitter
+    t = (last[:, None] - (per_chunk - 1 - np.arange(per_chunk))[None, :] / FS).reshape(-1)
+    _proc, out = _run(x[:n], t)
+    assert statuses(out) == []
+    reason = statuses(out, "discontinuity")[-1]["reason"]
+    assert "forward and back" in reason and "?dejitter=1" in reason and "sampling_rate" not in reason
+
+
 @pytest.mark.parametrize("kind", ["white", "emg", "brown", "sine", "flat", "clipped"])
 def test_non_ecg_input_is_flagged_not_processed(kind: str) -> None:
     rng = np.random.default_rng(5)

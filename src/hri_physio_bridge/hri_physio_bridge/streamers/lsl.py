@@ -1,16 +1,23 @@
 """Lab Streaming Layer streamer (pylsl).
 
-Address: ``<stream name>[?type=<type>&source_id=<id>&sync=1]``, e.g.
+Address: ``<stream name>[?type=<type>&source_id=<id>&sync=1&dejitter=1]``, e.g.
 ``lsl:PolarH10/1234/ECG`` or ``lsl:PolarH10/1234/ECG?type=ECG``. As an input the
 stream is resolved by name (and type / source id when given); ``sync=1`` turns
 on liblsl's clock synchronisation (``proc_clocksync``) for streams coming from
 another machine: each timestamp gets the measured offset between the sender's
 LSL clock and ours added, so it is on this host's clock. It is off by default
 (on one machine the sender's timestamps are already on our clock, and we keep
-them unchanged); a lab's station turns it on. Only clocksync: liblsl's dejitter
-would replace the stamps by a regression line and hide the gaps and clock jumps
-the receiver reports. Either way the measured offset is reported
-(:meth:`LslStreamer.clock_offset`).
+them unchanged); a lab's station turns it on. Either way the measured offset is
+reported (:meth:`LslStreamer.clock_offset`).
+
+``dejitter=1`` turns on liblsl's dejitter (``proc_dejitter | proc_monotonize``) for
+a source whose own stamps jitter: one that stamps each chunk on arrival (a BLE
+strap's app pushing each notification with the time it came in) makes every chunk
+boundary a step of a few milliseconds forward or back, which the processor takes
+for lost samples or a clock jump, and its windows never fill. liblsl then replaces
+the stamps by its running regression line of the stream's sampling. It is off by
+default: on a stream stamped sample by sample (ours, ``polar_streamer``'s) that line
+would hide the gaps and clock jumps the receiver reports.
 """
 
 from __future__ import annotations
@@ -46,7 +53,7 @@ _TO_LSL = {
     "string": pylsl.cf_string,
 }
 _FROM_LSL = {v: k for k, v in _TO_LSL.items()}
-_QUERY_KEYS = {"type", "source_id", "sync"}
+_QUERY_KEYS = {"type", "source_id", "sync", "dejitter"}
 #: Seconds between two looks at the resolver's results while waiting for an input stream.
 RESOLVE_POLL = 0.05
 #: Seconds a status waits for liblsl's first time-correction estimate (later ones are instantaneous).
@@ -100,6 +107,7 @@ class LslStreamer(Streamer):
         self._outlet: pylsl.StreamOutlet | None = None
         self._dtype: np.dtype | None = None
         self.corrects_clock = self.params.get("sync", "0").lower() in ("1", "true", "yes")
+        self.dejitters = self.params.get("dejitter", "0").lower() in ("1", "true", "yes")
 
     # -- input ---------------------------------------------------------------
     def _predicate(self) -> str:
@@ -151,6 +159,8 @@ class LslStreamer(Streamer):
         if expected is not None:
             check_matches(spec, expected, self.uri)
         flags = pylsl.proc_clocksync if self.corrects_clock else 0
+        if self.dejitters:
+            flags |= pylsl.proc_dejitter | pylsl.proc_monotonize
         self._inlet = pylsl.StreamInlet(
             info, max_buflen=self.max_buflen, recover=False, processing_flags=flags
         )
