@@ -156,6 +156,19 @@ def test_more_outlets_than_liblsls_default_port_range_holds_are_all_found(lsl_na
     del outlets
 
 
+def _received(source: LslStreamer, n: int, timeout: float = 20.0) -> tuple[list[float], list[float]]:
+    """Stamps and first-channel values of the input's frames, until ``n`` samples or ``timeout`` s."""
+    stamps: list[float] = []
+    values: list[float] = []
+    deadline = time.monotonic() + timeout
+    while len(stamps) < n and time.monotonic() < deadline:
+        frame = source.receive(timeout=0.2)
+        if frame is not None:
+            stamps.extend(frame.timestamps.tolist())
+            values.extend(frame.values[:, 0].tolist())
+    return stamps, values
+
+
 @pytest.mark.parametrize("sync", [True, False])
 def test_time_correction_is_applied_with_sync_and_reported_either_way(lsl_name: str, sync: bool) -> None:
     """``?sync=1``: liblsl's time correction (the sender's LSL clock -> ours) is added to every stamp;
@@ -173,12 +186,7 @@ def test_time_correction_is_applied_with_sync_and_reported_either_way(lsl_name: 
         wait_until(outlet.have_consumers, 20, "the receiver's inlet")
         stamps = 5000.0 + np.arange(N) / RATE
         outlet.push_chunk([[float(i)] for i in range(N)], timestamp=stamps.tolist())
-        got: list[float] = []
-        deadline = time.monotonic() + 20
-        while len(got) < N and time.monotonic() < deadline:
-            frame = source.receive(timeout=0.2)
-            if frame is not None:
-                got.extend(frame.timestamps.tolist())
+        got, _ = _received(source, N)
         assert len(got) == N
         offsets: list[float] = []
         wait_until(lambda: offsets.append(source.clock_offset()) or offsets[-1] is not None, 20,
@@ -226,14 +234,7 @@ def test_dejitter_smooths_a_source_that_stamps_chunks_on_arrival(lsl_name: str, 
         for c in range(n_chunks):
             chunk = slice(c * per_chunk, (c + 1) * per_chunk)
             outlet.push_chunk([[float(i)] for i in range(n)[chunk]], timestamp=stamps[chunk].tolist())
-        got_t: list[float] = []
-        got_v: list[float] = []
-        deadline = time.monotonic() + 20
-        while len(got_t) < n and time.monotonic() < deadline:
-            frame = source.receive(timeout=0.2)
-            if frame is not None:
-                got_t.extend(frame.timestamps.tolist())
-                got_v.extend(frame.values[:, 0].tolist())
+        got_t, got_v = _received(source, n)
     finally:
         source.close()
     assert got_v == [float(i) for i in range(n)]  # every sample, in order, whatever the stamps
