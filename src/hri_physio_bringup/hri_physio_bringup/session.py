@@ -881,10 +881,11 @@ def _run(options: SessionConfig, plan: SessionPlan, folder: SessionFolder, claim
             out.fail(f"node exit statuses {bad}")
         if not stop.is_set() and view.ended_at is None and out.code == 0:
             out.fail("the session did not reach its end")
-        began = view.started_at is not None
-        if bag is not None and not options.no_report and not began:
+        wants_report = bag is not None and not options.no_report
+        if wants_report and view.started_at is None:
             console.say("[session] no report: the session did not begin (the bag holds its start-up)")
-        report = _report(folder, console) if bag is not None and not options.no_report and began else None
+            wants_report = False
+        report = _report(folder, console) if wants_report else None
         folder.write_summary(_summary_json(options, plan, folder, claim, started, view, out, group, clock,
                                            report, lab=lab))
         if out.problem:

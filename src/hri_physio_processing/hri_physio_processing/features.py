@@ -190,7 +190,7 @@ def detect(x: np.ndarray, cfg: FeatureSettings,
             _, info = nk.ecg_peaks(clean, sampling_rate=fs, correct_artifacts=cfg.correct_artifacts)
             return clean, np.asarray(info["ECG_R_Peaks"], dtype=np.int64)
         if cfg.mode == "ppg":
-            signals, info = nk.ppg_process(-x if cfg.polarity == "inverted" else x, sampling_rate=fs)
+            signals, info = nk.ppg_process(_ppg_upright(x, cfg)[0], sampling_rate=fs)
             peaks = np.asarray(info["PPG_Peaks"], dtype=np.int64)
             return signals["PPG_Clean"].to_numpy(dtype=np.float64), peaks
         signals, info = nk.eda_process(x, sampling_rate=fs)
@@ -263,11 +263,18 @@ def _ecg(x: np.ndarray, cfg: FeatureSettings) -> WindowResult:
     return res
 
 
+def _ppg_upright(x: np.ndarray, cfg: FeatureSettings) -> tuple[np.ndarray, bool]:
+    """The PPG turned over when the user says it is upside down (``inverted``), and whether it was:
+    a PPG window holds no reliable cue of its own polarity."""
+    inverted = cfg.polarity == "inverted"
+    return (-x if inverted else x), inverted
+
+
 def _ppg(x: np.ndarray, cfg: FeatureSettings) -> WindowResult:
     import neurokit2 as nk
 
-    inverted = cfg.polarity == "inverted"  # no reliable cue in a PPG window itself: the user says so
-    signals, info = nk.ppg_process(-x if inverted else x, sampling_rate=cfg.nk_rate)
+    upright, inverted = _ppg_upright(x, cfg)
+    signals, info = nk.ppg_process(upright, sampling_rate=cfg.nk_rate)
     clean = signals["PPG_Clean"].to_numpy(dtype=np.float64)
     peaks = np.asarray(info["PPG_Peaks"], dtype=np.int64)
 

@@ -106,8 +106,12 @@ class LslStreamer(Streamer):
         self._inlet: pylsl.StreamInlet | None = None
         self._outlet: pylsl.StreamOutlet | None = None
         self._dtype: np.dtype | None = None
-        self.corrects_clock = self.params.get("sync", "0").lower() in ("1", "true", "yes")
-        self.dejitters = self.params.get("dejitter", "0").lower() in ("1", "true", "yes")
+        self.corrects_clock = self._switch("sync")
+        self.dejitters = self._switch("dejitter")
+
+    def _switch(self, key: str) -> bool:
+        """An on/off address option (``?sync=1``): 1, true or yes turn it on."""
+        return self.params.get(key, "0").lower() in ("1", "true", "yes")
 
     # -- input ---------------------------------------------------------------
     def _predicate(self) -> str:
