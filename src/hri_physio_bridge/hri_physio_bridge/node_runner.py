@@ -65,8 +65,19 @@ class ManagedNode(Node):
     - :meth:`close` is called once at the end, before the node is destroyed (flush, stop threads).
     """
 
-    #: Set to True (e.g. from a callback) to end :meth:`run` by itself.
-    finished: bool = False
+    _finished = False
+    _run_stop: threading.Event | None = None  # what the default run() waits on
+
+    @property
+    def finished(self) -> bool:
+        """Set to True (e.g. from a callback) to end :meth:`run` by itself."""
+        return self._finished
+
+    @finished.setter
+    def finished(self, value: bool) -> None:
+        self._finished = value
+        if value and self._run_stop is not None:
+            self._run_stop.set()  # wakes the default run() at once: it waits, it does not poll
 
     def declare_config(self, config: C) -> C:
         """Declare every option of ``config`` as a ROS parameter; return the validated result.
@@ -139,9 +150,9 @@ class ManagedNode(Node):
         return SetParametersResult(successful=True)
 
     def run(self, stop: threading.Event) -> int:
-        while not stop.wait(0.1):
-            if self.finished:
-                break
+        self._run_stop = stop
+        if not self.finished:
+            stop.wait()
         return 0
 
     def on_stop(self, signal_name: str) -> None:

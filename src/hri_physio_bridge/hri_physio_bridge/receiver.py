@@ -214,6 +214,9 @@ class PhysioReceiver:
         self._threads: list[threading.Thread] = []
         self._fatal: BaseException | None = None
         self._finished = threading.Event()
+        #: Called (from the thread that ended it) once the receiver has finished by itself: a finite
+        #: input forwarded, or a fatal error. Lets its owner wait for that rather than poll.
+        self.on_finished: Callable[[], None] | None = None
         self._abandon = threading.Event()  # a stop whose drain ran out: the consumer leaves at once
         self._lock = threading.Lock()
         # Rejected chunks, overflows and NaN/inf can repeat many times a second: one line per kind
@@ -346,9 +349,14 @@ class PhysioReceiver:
                 self._stop.set()
                 if self.buffer is not None:
                     self.buffer.close()
-                self._finished.set()
+                self._finish()
 
         return run
+
+    def _finish(self) -> None:
+        if self.on_finished is not None:
+            self.on_finished()  # first: whoever sees it finished has been told too
+        self._finished.set()
 
     @property
     def fatal(self) -> BaseException | None:
@@ -628,13 +636,14 @@ class PhysioReceiver:
             self._resume.wait()
             if self._abandon.is_set():
                 return  # a stop ran out of time for frame after frame: it publishes the rest at once
-            frame = self.buffer.dequeue_frame(cfg.output_frame, cfg.sample_overlap, timeout=0.1)
+            # No timeout: a frame, or the buffer's close (a stop, the input's end, a fatal error), wakes it.
+            frame = self.buffer.dequeue_frame(cfg.output_frame, cfg.sample_overlap)
             if frame is None:
                 if self.buffer.closed:
                     if not self._stop.is_set():
                         # Finite input done: forward the tail, then report completion.
                         self._publish_rest()
-                        self._finished.set()
+                        self._finish()
                     return
                 continue
             self._resume.wait()  # a pause that came while waiting for this frame holds it

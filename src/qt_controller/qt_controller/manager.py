@@ -30,6 +30,8 @@ from qt_controller.robot_interface import Outcome, RobotInterface
 LOG_LINES_PER_SECOND = 20
 #: A long burst gets a summary line at least this often.
 BURST_SUMMARY_PERIOD = 5.0
+#: A burst ends (its summary is logged) when no line came for this long.
+BURST_GAP = 0.1
 
 #: Machine-readable ``data["error"]`` codes of replies the manager makes itself.
 OVERLOADED = "overloaded"
@@ -84,6 +86,7 @@ class RobotManager:
         self._queue: deque[CommandLine] = deque()
         self._ready = threading.Condition()
         self._closed = False  # run() has ended: new lines are answered "stopping" at once
+        self._stop_requested = False
         self._clock = clock
         self._logged: deque[float] = deque()  # when the last lines were logged one by one
         self._burst: _BurstLog | None = None
@@ -113,9 +116,10 @@ class RobotManager:
             return len(self._queue)
 
     def next_line(self, timeout: float | None) -> CommandLine | None:
-        """The oldest queued line, waiting up to ``timeout`` s for one (None: none came)."""
+        """The oldest queued line, waiting up to ``timeout`` s (None: until a line or a stop request)
+        for one (None: none came)."""
         with self._ready:
-            if not self._queue:
+            if not self._queue and not self._stop_requested:
                 self._ready.wait(timeout)
             return self._queue.popleft() if self._queue else None
 
@@ -177,10 +181,23 @@ class RobotManager:
         raise TypeError(f"no dispatch for {command!r}")
 
     # ------------------------------------------------------------------ the loop
-    def run(self, reply: Callable[[Reply], None], stop: threading.Event, poll: float = 0.1) -> None:
-        """Handle queued lines in order until ``exit`` or ``stop``; then answer what is left ``stopping``."""
-        while not stop.is_set() and not self.exit_requested:
-            item = self.next_line(poll)
+    def request_stop(self) -> None:
+        """End :meth:`run` soon (from any thread): it wakes at once, as for a new line."""
+        with self._ready:
+            self._stop_requested = True
+            self._ready.notify_all()
+
+    def run(self, reply: Callable[[Reply], None], stop: threading.Event, poll: float | None = None) -> None:
+        """Handle queued lines in order until ``exit``, :meth:`request_stop` or ``stop``; then answer
+        what is left ``stopping``.
+
+        Between lines it waits for the next one; ``stop`` is looked at every ``poll`` seconds (None:
+        only when a line comes or :meth:`request_stop` wakes it). A burst's summary is logged once no
+        line came for BURST_GAP seconds.
+        """
+        while not stop.is_set() and not self.exit_requested and not self._stop_requested:
+            wait = poll if self._burst is None else min(poll or BURST_GAP, BURST_GAP)
+            item = self.next_line(wait)
             if item is None:
                 self._end_burst()
                 continue

@@ -305,6 +305,26 @@ def test_requests_from_many_threads_are_all_accounted_for(tmp_path: Path) -> Non
     rig.player.close()
 
 
+def test_the_loader_waits_for_requests_and_close_ends_it_at_once(tmp_path: Path) -> None:
+    """The loader thread sleeps until a request comes (no polling); close() wakes it, and the wake-up
+    is no request: nothing fails, nothing is left pending."""
+    rig = Rig(tmp_path)
+    rig.player.start_loader()
+    loader = rig.player._loader
+    assert loader is not None
+    rig.player.request("beat:120")
+    for _ in range(2000):
+        rig.player.step(rig.stop)
+        if rig.player.status().requests.started == 1:
+            break
+    assert rig.player.status().requests.started == 1
+    rig.player.close()
+    loader.join(2.0)
+    assert not loader.is_alive()
+    counts = rig.player.status().requests
+    assert (counts.received, counts.failed) == (1, 0) and rig.errors() == []
+
+
 def test_status_is_published_on_every_change(tmp_path: Path) -> None:
     rig = Rig(tmp_path, fade=0.5)
     rig.player._emit_if_changed()

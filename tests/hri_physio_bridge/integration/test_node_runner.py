@@ -211,3 +211,41 @@ def test_the_executor_thread_waits_without_polling_and_close_wakes_it(ros_contex
         spinner.close(join_timeout=30.0)
         node.destroy_node()
     assert not spinner._thread.is_alive()  # woken by close(), not by a timeout of its own
+
+
+FINISHING_SCRIPT = """
+import sys
+from hri_physio_bridge import node_runner
+from hri_physio_bridge.config import NodeConfig
+
+class Node(node_runner.ManagedNode):
+    def __init__(self, config):
+        super().__init__("finishing_test")
+        self.config = self.declare_config(config)
+        self.calls = 0
+        self.create_timer(0.05, self.tick)
+    def tick(self):
+        self.calls += 1
+        if self.calls == 3:
+            self.finished = True  # the default run() waits for this or a stop signal
+    def close(self):
+        print(f"closed after {self.calls} calls, finished {self.finished}", flush=True)
+
+sys.exit(node_runner.run_node("finishing_test", NodeConfig, Node, argv=sys.argv[1:]))
+"""
+
+
+def test_a_node_that_sets_finished_ends_the_default_run(tmp_path) -> None:
+    """The default run() waits (no polling) and ``finished = True`` from a callback wakes it: the node
+    closes and exits 0 by itself."""
+    import re
+    import subprocess
+    import sys
+
+    script = tmp_path / "node.py"
+    script.write_text(FINISHING_SCRIPT)
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120,
+                          stdin=subprocess.DEVNULL)
+    assert done.returncode == 0, done.stderr
+    closed = re.fullmatch(r"closed after (\d+) calls, finished True\n", done.stdout)
+    assert closed is not None and int(closed.group(1)) >= 3, done.stdout  # a busy machine may tick on

@@ -166,8 +166,11 @@ def run_to_end(rx: PhysioReceiver, src: MemorySource, chunks: list[Frame]) -> No
 
 def test_every_sample_forwarded_once_in_order_with_overlap_and_tail() -> None:
     rx, src, sink = make(output_frame=5, sample_overlap=2)
+    told: list[int] = []
+    rx.on_finished = lambda: told.append(rx.stats.published_samples)  # how the node waits for the end
     chunks = [chunk(i, 3) for i in range(0, 30, 3)]
     run_to_end(rx, src, chunks)
+    assert told == [30]  # once, with the tail published
     firsts = [sink.frames[0].values[:, 0]] + [f.values[2:, 0] for f in sink.frames[1:-1]]
     # The tail frame (from drain) holds only unpublished samples.
     all_new = np.concatenate([*firsts, sink.frames[-1].values[:, 0]])
@@ -240,11 +243,14 @@ def test_a_source_lost_again_while_reopening_is_waited_for() -> None:
 
 def test_lost_source_without_reconnect_is_fatal_but_flushes(caplog: pytest.LogCaptureFixture) -> None:
     rx, src, sink = make(reconnect=False)
+    told = threading.Event()
+    rx.on_finished = told.set
     with caplog.at_level(logging.INFO, logger="test"):
         rx.start()
         src.chunks.put(chunk(0, 6))
         src.chunks.put(StreamLostError("gone"))
         assert rx.wait(5.0)
+        assert told.is_set()
         rx.stop()
     assert isinstance(rx.fatal, StreamLostError) and src.opens == 1
     assert sum(f.num_samples for f in sink.frames) == 6

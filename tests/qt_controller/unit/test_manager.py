@@ -189,6 +189,52 @@ def test_run_loop_stops_on_event() -> None:
     assert not worker.is_alive()
 
 
+def test_without_a_poll_the_loop_waits_for_lines_and_a_stop_request_ends_it() -> None:
+    """The controller's worker waits for the next line (no polling); request_stop wakes it at once."""
+    robot = RecordingRobot()
+    manager = RobotManager(robot)
+    replies: list[Reply] = []
+    stop = threading.Event()  # never set: only the request ends the loop
+    worker = threading.Thread(target=manager.run, args=(replies.append, stop, None))
+    worker.start()
+    manager.submit("set volume 7", remote=True)
+    wait_until(lambda: len(replies) == 1, 5, "the reply to a line submitted while the loop waits")
+    assert worker.is_alive()
+    manager.request_stop()
+    worker.join(5)
+    assert not worker.is_alive()
+    late = manager.submit("set volume 8", remote=True)
+    assert late is not None and late.data["error"] == STOPPING
+    assert [c for c in robot.calls if c[0] == "set_volume"] == [("set_volume", (7,))]
+
+
+def test_a_stop_request_before_the_loop_starts_ends_it_at_once() -> None:
+    manager = RobotManager(RecordingRobot())
+    manager.request_stop()
+    worker = threading.Thread(target=manager.run, args=(lambda r: None, threading.Event(), None))
+    worker.start()
+    worker.join(5)
+    assert not worker.is_alive()
+
+
+def test_without_a_poll_a_burst_summary_still_comes_when_the_lines_stop() -> None:
+    log = logging.getLogger("test.manager.burst_no_poll")
+    log.propagate = False
+    log.setLevel(logging.DEBUG)
+    handler = LogLines()
+    log.handlers[:] = [handler]
+    manager = RobotManager(RecordingRobot(), log, clock=lambda: 0.0)
+    for i in range(LOG_LINES_PER_SECOND + 5):
+        manager.submit(f"set volume {i}", remote=True)
+    worker = threading.Thread(target=manager.run, args=(lambda r: None, threading.Event(), None))
+    worker.start()
+    wait_until(lambda: len(handler.lines) == LOG_LINES_PER_SECOND + 1, 10, "the burst summary")
+    assert handler.lines[-1].startswith("5 more command lines in a burst: 5 ok")
+    manager.request_stop()
+    worker.join(5)
+    assert not worker.is_alive()
+
+
 def test_exit_from_the_topic_is_refused_unless_allowed() -> None:
     manager = RobotManager(RecordingRobot())
     refused = manager.handle("exit", remote=True)

@@ -46,7 +46,7 @@ class AudioPlayer:
         self.clock, self.media_dir = clock, media_dir
         self.on_status = on_status or (lambda status: None)
         self.log = log or logging.getLogger(__name__)
-        self._requests: queue.Queue[str] = queue.Queue()
+        self._requests: queue.Queue[str | None] = queue.Queue()  # None: wakes the loader to stop
         self._commands: queue.Queue[_Command] = queue.Queue()
         self._lock = threading.RLock()  # the mixer
         self.ledger = RequestLedger()
@@ -66,15 +66,21 @@ class AudioPlayer:
 
     def _load_loop(self) -> None:
         while not self._stop.is_set():
-            try:
-                first = self._requests.get(timeout=0.1)
-            except queue.Empty:
-                continue
-            self._prepare([first, *take_queued(self._requests)])
+            waiting = self._queued(self._requests.get())  # waits for a request, or the stop's None
+            if waiting:
+                self._prepare(waiting)
+
+    def _queued(self, *first: str | None) -> list[str]:
+        """``first`` and the requests queued now, oldest first (the stop's wake-up left out)."""
+        return [text for text in (*first, *take_queued(self._requests)) if text is not None]
+
+    def _stop_loader(self) -> None:
+        self._stop.set()
+        self._requests.put(None)
 
     def prepare_pending(self) -> None:
         """Prepare every queued request now, on this thread (what the loader does; for tests and tools)."""
-        waiting = take_queued(self._requests)
+        waiting = self._queued()
         if waiting:
             self._prepare(waiting)
 
@@ -91,7 +97,7 @@ class AudioPlayer:
                 for older in [*waiting, *([ready.text] if ready else [])]:
                     self.ledger.settle(older, "superseded")
                 waiting, ready = [], command
-            waiting.extend(take_queued(self._requests))  # newer than everything above: tried first
+            waiting.extend(self._queued())  # newer than everything above: tried first
         if ready is not None:
             self._commands.put(ready)
 
@@ -134,7 +140,7 @@ class AudioPlayer:
             while not self._stop.is_set() and self.step(stop):
                 pass
         finally:
-            self._stop.set()
+            self._stop_loader()
         return 0
 
     def step(self, stop: threading.Event) -> bool:
@@ -189,7 +195,7 @@ class AudioPlayer:
             return self.ledger.status(self.clock(), state, error, extra, **fields)
 
     def close(self) -> None:
-        self._stop.set()
+        self._stop_loader()
         if self._loader is not None:
             self._loader.join(timeout=5.0)
         self.sink.close()

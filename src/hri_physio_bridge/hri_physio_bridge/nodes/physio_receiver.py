@@ -63,12 +63,13 @@ class PhysioReceiverNode(ManagedNode):
         except (InvalidTopicNameException, OSError) as exc:  # a topic or a file the options name
             receiver.request_stop()
             return fail(PROG, f"cannot open {receiver.source.uri} -> {receiver.sink.uri}: {one_line(exc)}")
+        receiver.on_finished = stop.set  # a finite input's end or a fatal error ends the wait below
         receiver.start()
         if self.config.interactive:
             threading.Thread(target=_console, args=(receiver, stop), daemon=True).start()
         period = self.config.status_period
         next_status = time.monotonic() + period
-        while not stop.wait(0.1) and not receiver.finished:
+        while not stop.wait(max(0.0, next_status - time.monotonic())) and not receiver.finished:
             if time.monotonic() >= next_status:
                 status = self.publish_status()
                 log.info(

@@ -72,9 +72,18 @@ class QtControllerNode(ManagedNode):
 
     def start(self, stop: threading.Event) -> None:
         """Handle queued lines on a worker thread until ``exit`` or ``stop``."""
-        self._worker = threading.Thread(target=self.manager.run, args=(self.publish_reply, stop),
-                                        name="robot-manager", daemon=True)
+        def work() -> None:
+            try:
+                self.manager.run(self.publish_reply, stop)
+            finally:
+                stop.set()  # an exit command ends the node as a stop does
+
+        self._worker = threading.Thread(target=work, name="robot-manager", daemon=True)
         self._worker.start()
+
+    def on_stop(self, signal_name: str) -> None:
+        super().on_stop(signal_name)
+        self.manager.request_stop()  # the worker waits for lines: wake it
 
     def join(self, timeout: float = 5.0) -> None:
         if self._worker is not None:
@@ -85,9 +94,8 @@ class QtControllerNode(ManagedNode):
         if self.config.interactive:
             threading.Thread(target=_console, args=(self,), name="console", daemon=True).start()
         self.get_logger().info(f"listening for commands on {self.config.input_topic}")
-        while self._worker is not None and self._worker.is_alive():
-            if stop.wait(0.1):
-                break
+        stop.wait()  # set by a stop signal (after on_stop) or by the worker's end
+        self.manager.request_stop()
         self.join()
         if self.manager.exit_requested:
             self.get_logger().info("exit command received: exiting")
