@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from array import array
 from collections.abc import Callable
 from typing import Any
 
@@ -102,6 +103,7 @@ class MockQtRobotNode(ManagedNode):
                 backend,
             ),
         ]
+        self._joint_msg: JointState | None = None
         self.timer = self.create_timer(1.0 / v.joint_state_rate, self._tick)
         self.get_logger().info(
             f"mock QT robot ready: gestures {', '.join(gestures.names)}; service backend "
@@ -143,10 +145,17 @@ class MockQtRobotNode(ManagedNode):
                 self.get_logger().info(f"{event['event']} {json.dumps(detail)}")
 
     def _tick(self) -> None:
-        self.robot.update()
+        # One clock reading per tick, for the motion and the stamp (under sim time both were the same
+        # value anyway: the clock moves only between callbacks of this executor).
+        now = self.get_clock().now()
+        self.robot.update(now.nanoseconds * 1e-9)
         names, positions, velocities = self.robot.joint_state()
-        msg = JointState(name=names, position=positions, velocity=velocities, effort=[0.0] * len(names))
-        msg.header.stamp = self.get_clock().now().to_msg()
+        msg = self._joint_msg
+        if msg is None:  # the joints are always the same ones, in the same order
+            msg = self._joint_msg = JointState(name=names, effort=array("d", bytes(8 * len(names))))
+        # Reused, with arrays of doubles: building a JointState from lists checks every value in Python.
+        msg.position, msg.velocity = array("d", positions), array("d", velocities)
+        msg.header.stamp = now.to_msg()
         self.joint_pub.publish(msg)
         self._flush_events()
 
