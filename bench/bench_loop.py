@@ -17,9 +17,13 @@ Latency of the input path: this process opens its own LSL inlet on the strap's h
 that stamp, and the latency is the time (``pylsl.local_clock``, one monotonic clock for both ends:
 the LSL end runs in a child process of its own, so the ROS end's callbacks cannot delay its clock
 reading) from its arrival on LSL to its arrival on the coach's topic: LSL push -> physio_receiver -> ROS 2 ->
-the coach's input. p50 and p99 over the window. Not in the figure: the hop from the strap's push
-to an inlet (localhost TCP, the same for this inlet as for the receiver's), and the coach's own
-executor (this process's subscriber stands in for the coach's, with the same QoS).
+the coach's input. The arrival on the topic is the time the subscriber's middleware received the
+sample (DDS's ``received_timestamp`` in the message info, mapped onto the same monotonic clock): what
+a subscriber's own executor adds after that (waking up, taking the message) depends on that process,
+not on the path, and a Python callback in this process is a noisy stand-in for the coach's. That
+figure is printed too (``to a Python callback``). p50 and p99 over the window. Not in the figure:
+the hop from the strap's push to an inlet (localhost TCP, the same for this inlet as for the
+receiver's).
 
 Side by side in one run: ``--baseline-ref REF`` first runs the same session on the sources of git
 commit REF (``git archive`` into a temporary folder, put first on PYTHONPATH; the console scripts
@@ -76,7 +80,8 @@ class LoopResult:
     label: str
     seconds: float
     cpu: dict[str, float] = field(default_factory=dict)  # % of one core, by node
-    latency_ms: list[float] = field(default_factory=list)
+    latency_ms: list[float] = field(default_factory=list)  # to the coach's reader (DDS arrival)
+    callback_latency_ms: list[float] = field(default_factory=list)  # to this process's Python callback
     demo_wall_s: float | None = None
     #: % of one core of floor_node.py over the same window: an rclpy node that only follows /clock.
     floor: float | None = None
@@ -85,8 +90,9 @@ class LoopResult:
     def total(self) -> float:
         return sum(self.cpu.values())
 
-    def p(self, q: float) -> float:
-        return float(np.percentile(self.latency_ms, q)) if self.latency_ms else float("nan")
+    def p(self, q: float, latencies: list[float] | None = None) -> float:
+        values = self.latency_ms if latencies is None else latencies
+        return float(np.percentile(values, q)) if values else float("nan")
 
 
 # -- /proc ---------------------------------------------------------------------------------------
@@ -179,7 +185,8 @@ class LatencyProbe:
         from hri_physio_bridge.ros_frames import msg_to_frame
         from hri_physio_bridge.ros_tools import ExecutorThread
 
-        self.ros_arrival: dict[float, float] = {}  # strap stamp -> arrival on the coach's topic
+        self.ros_arrival: dict[float, float] = {}  # strap stamp -> arrival on the coach's topic (DDS)
+        self.callback_arrival: dict[float, float] = {}  # strap stamp -> this process's callback
         self._lsl_arrival: dict[float, float] | None = None  # strap stamp -> arrival on LSL, once ended
         self.measuring = False
         self._lock = threading.Lock()
@@ -187,13 +194,16 @@ class LatencyProbe:
         rclpy.init(context=self.context, domain_id=domain)  # the session's, whatever this shell says
         self.node = rclpy.create_node(f"bench_loop_{uuid.uuid4().hex[:6]}", context=self.context)
 
-        def on_frame(msg: Float64MultiArray) -> None:
-            now = pylsl.local_clock()
+        def on_frame(msg: Float64MultiArray, info: dict) -> None:
+            now, wall_ns = pylsl.local_clock(), time.time_ns()
+            # The middleware's receive time (system clock, ns) onto the monotonic clock, read together.
+            received = now - (wall_ns - int(info["received_timestamp"])) * 1e-9
             stamps = msg_to_frame(msg).timestamps
             with self._lock:
                 if self.measuring:
                     for t in stamps:
-                        self.ros_arrival[round(float(t), 6)] = now
+                        self.ros_arrival[round(float(t), 6)] = received
+                        self.callback_arrival[round(float(t), 6)] = now
 
         self.node.create_subscription(Float64MultiArray, topic, on_frame, frame_qos())
         self._spinner = ExecutorThread(self.node, context=self.context)
@@ -221,12 +231,14 @@ class LatencyProbe:
             self._lsl.join(5.0)
         return self._lsl_arrival
 
-    def latencies(self) -> list[float]:
-        """Seconds from LSL to the coach's topic of each sample seen on both, in stamp order."""
+    def latencies(self, arrival: dict[float, float] | None = None) -> list[float]:
+        """Seconds from LSL to the coach's topic (or to ``arrival``) of each sample seen on both, in
+        stamp order."""
         lsl = self._end_lsl()
         with self._lock:
-            both = sorted(set(lsl) & set(self.ros_arrival))
-            return [self.ros_arrival[t] - lsl[t] for t in both]
+            ros = dict(self.ros_arrival if arrival is None else arrival)
+        both = sorted(set(lsl) & set(ros))
+        return [ros[t] - lsl[t] for t in both]
 
     def close(self) -> None:
         import rclpy
@@ -382,6 +394,7 @@ def run_loop(label: str, seconds: float, settle: float, env: dict[str, str] | No
         # Samples that reached the coach's topic until 2 s after the window are still counted.
         time.sleep(2.0)
         result.latency_ms = [x * 1e3 for x in probe.latencies()]
+        result.callback_latency_ms = [x * 1e3 for x in probe.latencies(probe.callback_arrival)]
     finally:
         if viewer is not None:
             viewer.close()
@@ -412,6 +425,7 @@ def merged(rounds: list[LoopResult]) -> LoopResult:
     for name in {n for r in rounds for n in r.cpu}:
         out.cpu[name] = float(np.mean([r.cpu[name] for r in rounds if name in r.cpu]))
     out.latency_ms = [x for r in rounds for x in r.latency_ms]
+    out.callback_latency_ms = [x for r in rounds for x in r.callback_latency_ms]
     floors = [r.floor for r in rounds if r.floor is not None]
     out.floor = float(np.mean(floors)) if floors else None
     return out
@@ -455,12 +469,17 @@ def table(now: LoopResult, base: LoopResult | None) -> None:
           f"{ratio(now.floor, old_floor):>9}")
     print("  floor: floor_node.py in the session's domain, an rclpy node that only follows /clock: the\n"
           "  least any node on the session's sim clock costs on this machine (under any waiting node)")
-    print("\n== Input path: strap HR sample on LSL -> the coach's input topic ==")
+    print("\n== Input path: strap HR sample on LSL -> the coach's input topic (its reader's DDS arrival) ==")
     print(f"{'':<22} {'baseline':>9} {'now':>7} {'now/base':>9}")
     for q in (50, 99):
         old = base.p(q) if base else None
         print(f"{f'p{q} (ms)':<22} {fmt(old):>9} {fmt(now.p(q)):>7} {ratio(now.p(q), old):>9}")
     print(f"{'samples':<22} {len(base.latency_ms) if base else '-':>9} {len(now.latency_ms):>7}")
+    print("  to a Python callback (the above, plus this process's executor waking to take it):")
+    for q in (50, 99):
+        old = base.p(q, base.callback_latency_ms) if base else None
+        new = now.p(q, now.callback_latency_ms)
+        print(f"{f'  p{q} (ms)':<22} {fmt(old):>9} {fmt(new):>7} {ratio(new, old):>9}")
     if now.demo_wall_s is not None or (base and base.demo_wall_s is not None):
         old = base.demo_wall_s if base else None
         print(f"\n23-minute session at 30x, wall s: baseline {fmt(old)}, now {fmt(now.demo_wall_s)}")
