@@ -81,10 +81,6 @@ class QtControllerNode(ManagedNode):
         self._worker = threading.Thread(target=work, name="robot-manager", daemon=True)
         self._worker.start()
 
-    def on_stop(self, signal_name: str) -> None:
-        super().on_stop(signal_name)
-        self.manager.request_stop()  # the worker waits for lines: wake it
-
     def join(self, timeout: float = 5.0) -> None:
         if self._worker is not None:
             self._worker.join(timeout)
@@ -95,7 +91,7 @@ class QtControllerNode(ManagedNode):
             threading.Thread(target=_console, args=(self,), name="console", daemon=True).start()
         self.get_logger().info(f"listening for commands on {self.config.input_topic}")
         stop.wait()  # set by a stop signal (after on_stop) or by the worker's end
-        self.manager.request_stop()
+        self.manager.request_stop()  # the worker waits for lines: wake it
         self.join()
         if self.manager.exit_requested:
             self.get_logger().info("exit command received: exiting")
