@@ -88,8 +88,11 @@ class ManagedProcess:
     def returncode(self) -> int | None:
         """The node's outcome once its process has ended: the status it said its work ended with, if it
         said one (a teardown of the middleware that hung or crashed after it does not change that), else
-        the process's own exit status."""
-        code = self.proc.poll()
+        the process's own exit status.
+
+        Read at every step of a session's clock, for every process: the status comes from the
+        process's waiter thread (see :meth:`ProcessGroup._launch`), not from a ``waitpid`` per look."""
+        code = self.proc.returncode
         if code is None:
             return None
         if self.reader.is_alive():
@@ -165,6 +168,9 @@ class ProcessGroup:
         managed = ManagedProcess(name, argv, proc, threading.Thread(), log_path=log_path, env=env, echo=echo)
         managed.reader = threading.Thread(target=self._pump, args=(managed, echo, log), daemon=True)
         managed.reader.start()
+        # Reaps the process the moment it ends (``proc.returncode`` is then set): the launcher's loop
+        # reads that attribute, ten times a second per process, instead of asking the kernel each time.
+        threading.Thread(target=proc.wait, name=f"{name}-waiter", daemon=True).start()
         return managed
 
     @staticmethod

@@ -191,6 +191,31 @@ def test_wait_any_exit_ends_on_timeout_and_on_stop(on_path: Path) -> None:
     group.stop(grace=2.0)
 
 
+def test_an_exit_is_seen_without_asking_the_kernel_at_each_look(on_path: Path) -> None:
+    """The session's loop reads every process's ``returncode`` at each clock step: a reaper thread per
+    process sets it, so a look is an attribute read. The exit is seen even when a grandchild still
+    holds the output pipe open (the output reader alone would never know)."""
+    from hri_physio_bridge.waiting import wait_until
+
+    script(on_path, "forking_node", (
+        "import subprocess, sys\n"
+        "child = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(60)'])\n"
+        "print(child.pid, flush=True)\n"
+        "print('ready', flush=True)\n"
+        "import time; time.sleep(0.3); sys.exit(3)\n"))
+    group = ProcessGroup(out=io.StringIO())
+    (p,) = started(group, "forking")
+    polls: list[int] = []
+    real_poll = p.proc.poll
+    p.proc.poll = lambda: polls.append(1) or real_poll()  # type: ignore[method-assign]
+    assert wait_until(lambda: p.returncode is not None, 10.0, poll=0.01)
+    assert p.returncode == 3 and polls == []
+    assert p.reader.is_alive()  # the grandchild keeps the pipe open
+    os.kill(int(p.lines[0]), signal.SIGKILL)
+    p.proc.poll = real_poll  # type: ignore[method-assign]
+    assert group.stop(grace=2.0) == {"forking": 3}
+
+
 def test_missing_console_script_is_named() -> None:
     with pytest.raises(FileNotFoundError, match="console script 'no_such_node' not found"):
         find_executable("no_such_node")
