@@ -91,7 +91,7 @@ class ManagedProcess:
         the process's own exit status.
 
         Read at every step of a session's clock, for every process: the status comes from the
-        process's waiter thread (see :meth:`ProcessGroup._launch`), not from a ``waitpid`` per look."""
+        process's reaper thread (see :meth:`ProcessGroup._launch`), not from a ``waitpid`` per look."""
         code = self.proc.returncode
         if code is None:
             return None
@@ -170,7 +170,7 @@ class ProcessGroup:
         managed.reader.start()
         # Reaps the process the moment it ends (``proc.returncode`` is then set): the launcher's loop
         # reads that attribute, ten times a second per process, instead of asking the kernel each time.
-        threading.Thread(target=proc.wait, name=f"{name}-waiter", daemon=True).start()
+        threading.Thread(target=proc.wait, name=f"{name}-reaper", daemon=True).start()
         return managed
 
     @staticmethod
