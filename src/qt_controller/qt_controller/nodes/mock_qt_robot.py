@@ -103,7 +103,10 @@ class MockQtRobotNode(ManagedNode):
                 backend,
             ),
         ]
-        self._joint_msg: JointState | None = None
+        # Reused at every tick, with arrays of doubles (building a JointState from lists checks every
+        # value in Python); the joints are always the same ones, in the same order.
+        names = self.robot.joint_state()[0]
+        self._joint_msg = JointState(name=names, effort=array("d", bytes(8 * len(names))))
         self.timer = self.create_timer(1.0 / v.joint_state_rate, self._tick)
         self.get_logger().info(
             f"mock QT robot ready: gestures {', '.join(gestures.names)}; service backend "
@@ -149,11 +152,8 @@ class MockQtRobotNode(ManagedNode):
         # value anyway: the clock moves only between callbacks of this executor).
         now = self.get_clock().now()
         self.robot.update(now.nanoseconds * 1e-9)
-        names, positions, velocities = self.robot.joint_state()
+        _names, positions, velocities = self.robot.joint_state()
         msg = self._joint_msg
-        if msg is None:  # the joints are always the same ones, in the same order
-            msg = self._joint_msg = JointState(name=names, effort=array("d", bytes(8 * len(names))))
-        # Reused, with arrays of doubles: building a JointState from lists checks every value in Python.
         msg.position, msg.velocity = array("d", positions), array("d", velocities)
         msg.header.stamp = now.to_msg()
         self.joint_pub.publish(msg)
