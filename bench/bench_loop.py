@@ -36,6 +36,10 @@ every channel for the whole window (the messages and bytes it took are printed).
 
 The table also gives a floor: ``floor_node.py`` (an rclpy node that only follows ``/clock``) runs in
 the session's domain over the same window, the least any node on the sim clock costs on this machine.
+And the launcher's floor: after the window, with the session still running, ``launcher_floor.py``
+does only the launcher's ROS work for ``--launcher-floor`` seconds (default 30; 0: not measured). It
+takes what the launcher's subscriptions take and drives a clock like the session's to as many
+processes. What the launcher costs above it is its own work.
 
 ``--rounds N`` alternates the two sides N times each (baseline, now, now, baseline, ...) and averages:
 this machine drifts by 10-15 % over minutes, which one pair of runs would read as a change.
@@ -85,6 +89,9 @@ class LoopResult:
     demo_wall_s: float | None = None
     #: % of one core of floor_node.py over the same window: an rclpy node that only follows /clock.
     floor: float | None = None
+    #: % of one core of launcher_floor.py, and of the launcher, over a window of their own after the main one.
+    launcher_floor: float | None = None
+    launcher_beside_floor: float | None = None
 
     @property
     def total(self) -> float:
@@ -322,8 +329,38 @@ def phase_start(kind: str) -> float:
     raise SystemExit(f"the default routine has no {kind} phase")
 
 
+def launcher_floor(label: str, domain: int, seconds: float, env: dict[str, str],
+                   launcher: int) -> tuple[float, float] | None:
+    """% of one core of ``launcher_floor.py`` (in the session's domain) and of the launcher (pid
+    ``launcher``), over the same ``seconds`` once it is ready."""
+    cmd = [sys.executable, str(HERE.parent / "launcher_floor.py"), "--domain", str(domain)]
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        said = proc.stdout.readline().strip()  # "ready: ..." (or nothing: it ended, and stderr says why)
+        if not said.startswith("ready"):
+            status = proc.wait(30)
+            print(f"warning: {label}: launcher_floor.py did not start (status {status})", file=sys.stderr)
+            return None
+        print(f"{label}: launcher floor {said}", flush=True)
+        start, wall0 = (cpu_seconds(proc.pid), cpu_seconds(launcher)), time.monotonic()
+        time.sleep(seconds)
+        end, wall = (cpu_seconds(proc.pid), cpu_seconds(launcher)), time.monotonic() - wall0
+        if None in start or None in end or proc.poll() is not None:
+            print(f"warning: {label}: launcher_floor.py or the launcher ended early", file=sys.stderr)
+            return None
+        return (end[0] - start[0]) / wall * 100.0, (end[1] - start[1]) / wall * 100.0
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(60)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+
+
 def run_loop(label: str, seconds: float, settle: float, env: dict[str, str] | None = None,
-             live: str = "off") -> LoopResult:
+             live: str = "off", floor_seconds: float = 0.0) -> LoopResult:
     """The CPU of every process over ``seconds``, from ``settle`` s after the session's start."""
     env = dict(os.environ) if env is None else env
     device = "BENCH" + uuid.uuid4().hex[:6].upper()
@@ -395,6 +432,10 @@ def run_loop(label: str, seconds: float, settle: float, env: dict[str, str] | No
         time.sleep(2.0)
         result.latency_ms = [x * 1e3 for x in probe.latencies()]
         result.callback_latency_ms = [x * 1e3 for x in probe.latencies(probe.callback_arrival)]
+        if floor_seconds > 0:
+            measured = launcher_floor(label, domain[0], floor_seconds, env, proc.pid)
+            if measured is not None:
+                result.launcher_floor, result.launcher_beside_floor = measured
     finally:
         if viewer is not None:
             viewer.close()
@@ -428,6 +469,9 @@ def merged(rounds: list[LoopResult]) -> LoopResult:
     out.callback_latency_ms = [x for r in rounds for x in r.callback_latency_ms]
     floors = [r.floor for r in rounds if r.floor is not None]
     out.floor = float(np.mean(floors)) if floors else None
+    pairs = [(r.launcher_floor, r.launcher_beside_floor) for r in rounds if r.launcher_floor is not None]
+    if pairs:
+        out.launcher_floor, out.launcher_beside_floor = (float(x) for x in np.mean(pairs, axis=0))
     return out
 
 
@@ -469,6 +513,15 @@ def table(now: LoopResult, base: LoopResult | None) -> None:
           f"{ratio(now.floor, old_floor):>9}")
     print("  floor: floor_node.py in the session's domain, an rclpy node that only follows /clock: the\n"
           "  least any node on the session's sim clock costs on this machine (under any waiting node)")
+    if now.launcher_floor is not None or (base and base.launcher_floor is not None):
+        print("\n== The launcher beside its floor (a window of their own, after the one above) ==")
+        print(f"{'':<22} {'baseline':>9} {'now':>7} {'now/base':>9}")
+        for what, old, new in (
+                (LAUNCHER, base.launcher_beside_floor if base else None, now.launcher_beside_floor),
+                ("launcher_floor.py", base.launcher_floor if base else None, now.launcher_floor)):
+            print(f"{what:<22} {fmt(old):>9} {fmt(new):>7} {ratio(new, old):>9}")
+        print("  launcher_floor.py: only the launcher's ROS work (its subscriptions' messages taken, a\n"
+              "  clock like the session's driven to as many processes); above it: the launcher's own work")
     print("\n== Input path: strap HR sample on LSL -> the coach's input topic (its reader's DDS arrival) ==")
     print(f"{'':<22} {'baseline':>9} {'now':>7} {'now/base':>9}")
     for q in (50, 99):
@@ -496,6 +549,8 @@ def goals(now: LoopResult) -> None:
     line(f"worst waiting node ({worst[1]})", worst[0], GOALS["waiter"], " %")
     if now.floor is not None:
         print(f"  {'  (the floor: a node that only follows /clock)':<44} {fmt(now.floor, ' %'):>9}")
+    if worst[1] == LAUNCHER and now.launcher_floor is not None:
+        print(f"  {'  (the launcher floor: its ROS work alone)':<44} {fmt(now.launcher_floor, ' %'):>9}")
     line("video_streamer", now.cpu.get("video_streamer"), GOALS["video_streamer"], " %")
     line("neurokit_processor", now.cpu.get("neurokit_processor"), GOALS["neurokit_processor"], " %")
     line("LSL -> coach input p99", now.p(99), GOALS["latency_p99_ms"], " ms")
@@ -523,6 +578,9 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=1,
                         help="sessions per side, alternated (baseline, now, now, baseline, ...); the table "
                         "gives each node's mean CPU and the latencies of every round (default 1)")
+    parser.add_argument("--launcher-floor", type=float, default=30.0, metavar="SECONDS",
+                        help="after the window, measure launcher_floor.py beside the launcher for this long "
+                        "(default 30; 0: not)")
     parser.add_argument("--demo", action="store_true",
                         help="also time the 23-minute session at 30x (with --baseline-ref: both)")
     args = parser.parse_args()
@@ -547,10 +605,12 @@ def main() -> None:
             for which in order:
                 if which == "base" and env is not None:
                     print(f"baseline: {args.baseline_ref} ({window}), round {i + 1}", flush=True)
-                    bases.append(run_loop(args.baseline_ref, args.seconds, settle, env, live=args.live))
+                    bases.append(run_loop(args.baseline_ref, args.seconds, settle, env, live=args.live,
+                                          floor_seconds=args.launcher_floor))
                 elif which == "now":
                     print(f"now: the working tree ({window}), round {i + 1}", flush=True)
-                    nows.append(run_loop("now", args.seconds, settle, live=args.live))
+                    nows.append(run_loop("now", args.seconds, settle, live=args.live,
+                                         floor_seconds=args.launcher_floor))
         if bases:
             base = merged(bases)
             if args.demo:

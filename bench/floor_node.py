@@ -10,6 +10,9 @@ It runs at the lowest priority (nice 19): it wakes on every ``/clock`` step, the
 session's nodes wake too, and a measuring instrument must not delay the loop it measures (the
 input path's latency is measured in the same run). Its CPU time is the same at any priority.
 
+``--clock-topic`` follows another topic instead (remapped, as ``-r /clock:=...`` would): the
+followers of ``launcher_floor.py``'s clock.
+
     python bench/floor_node.py --domain 42
 """
 
@@ -31,12 +34,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--domain", type=int, required=True, help="the session's ROS domain")
+    parser.add_argument("--clock-topic", default="/clock", help="the clock to follow (default /clock)")
     args = parser.parse_args()
     os.nice(19)
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=args.domain)
     node = rclpy.create_node(f"bench_floor_{uuid.uuid4().hex[:6]}", context=context,
-                             parameter_overrides=[Parameter("use_sim_time", value=True)])
+                             parameter_overrides=[Parameter("use_sim_time", value=True)],
+                             cli_args=["--ros-args", "-r", f"/clock:={args.clock_topic}"])
     executor = LeanExecutor(context=context)
     executor.add_node(node)
 
