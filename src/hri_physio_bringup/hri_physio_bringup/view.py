@@ -155,6 +155,11 @@ class SessionView:
                 f"zone {zone}  {pace}  adaptations {self.adaptations}  robot actions {self.robot_actions}")
 
 
+def counted(n: int, noun: str) -> str:
+    """``1 adaptation``, ``2 adaptations``."""
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
+
+
 def summary(view: SessionView, wall: float, bag: str | None, now: float | None = None,
             restarts: dict[str, int] | None = None) -> str:
     """The closing lines; ``now`` (sim time) measures a session stopped before its end."""
@@ -173,8 +178,9 @@ def summary(view: SessionView, wall: float, bag: str | None, now: float | None =
     updates, behaviours = view.events.get("rule_update", 0), view.events.get("behaviour", 0)
     return "\n".join([
         head,
-        f"[session] zone {zone}; {in_zone}; {view.adaptations} adaptations in {updates} rule updates; "
-        f"{behaviours} behaviours; {view.robot_actions} robot actions",
+        f"[session] zone {zone}; {in_zone}; {counted(view.adaptations, 'adaptation')} in "
+        f"{counted(updates, 'rule update')}; {counted(behaviours, 'behaviour')}; "
+        f"{counted(view.robot_actions, 'robot action')}",
         *(f"[session] {n} rule update(s) gated: {label(code)} ({code})"
           for code, n in sorted(view.gated.items())),
         *(f"[session] {n} rule update(s) held: {label(code)} ({code})"

@@ -44,7 +44,7 @@ def test_view_counts_adaptations_gated_updates_and_time_in_zone() -> None:
     assert view.held == {gates.REFRACTORY: 1}
     text = summary(view, wall=46.0, bag="bags/x")
     assert "23.0 min of session in 46 s wall (30x)" in text
-    assert "50 % of 4 exercise HR samples in the zone; 1 adaptations in 5 rule updates" in text
+    assert "50 % of 4 exercise HR samples in the zone; 1 adaptation in 5 rule updates" in text
     assert "2 rule update(s) gated: too few valid HR samples (too_few_samples)" in text
     assert "1 rule update(s) gated: no heart-rate data (adaptation paused) (no_hr_data)" in text
     assert "1 rule update(s) held: refractory period after the last adaptation (refractory)" in text
