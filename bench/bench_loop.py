@@ -351,12 +351,17 @@ def launcher_floor(label: str, domain: int, seconds: float, env: dict[str, str],
             return None
         return (end[0] - start[0]) / wall * 100.0, (end[1] - start[1]) / wall * 100.0
     finally:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-            try:
-                proc.wait(60)
-            except subprocess.TimeoutExpired:
-                proc.kill()
+        interrupt(proc, 60)
+
+
+def interrupt(proc: subprocess.Popen, timeout: float) -> None:
+    """SIGINT to ``proc`` if it still runs, then SIGKILL after ``timeout`` s."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
 
 
 def run_loop(label: str, seconds: float, settle: float, env: dict[str, str] | None = None,
@@ -440,17 +445,8 @@ def run_loop(label: str, seconds: float, settle: float, env: dict[str, str] | No
         if viewer is not None:
             viewer.close()
         if floor is not None:
-            floor.send_signal(signal.SIGINT)
-            try:
-                floor.wait(30)
-            except subprocess.TimeoutExpired:
-                floor.kill()
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-            try:
-                proc.wait(90)
-            except subprocess.TimeoutExpired:
-                proc.kill()
+            interrupt(floor, 30)
+        interrupt(proc, 90)
         if probe is not None:
             probe.close()
         shutil.rmtree(out, ignore_errors=True)
