@@ -55,6 +55,21 @@ def message_class(type_name: str) -> Any:
     return getattr(importlib.import_module(f"{package}.{kind}"), name)
 
 
+def settled(snapshot: Any, timeout: float, what: str, steady: float = 3.0) -> Any:
+    """``snapshot()`` once it is non-empty and has not changed for ``steady`` s: discovery fills the
+    graph a participant at a time, and a first look can miss some."""
+    deadline = time.monotonic() + timeout
+    last, since = None, time.monotonic()
+    while time.monotonic() < deadline:
+        now = snapshot()
+        if now != last:
+            last, since = now, time.monotonic()
+        elif now and time.monotonic() - since >= steady:
+            return now
+        time.sleep(0.2)
+    raise SystemExit(f"launcher_floor.py: {what} not seen (or still changing) after {timeout:g} s")
+
+
 def wait_for(condition: Any, timeout: float, what: str) -> Any:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -102,8 +117,14 @@ def main() -> None:
     tag = uuid.uuid4().hex[:6]
     node = rclpy.create_node(f"bench_launcher_floor_{tag}", context=context)
     on_demand = rclpy.create_node(f"bench_launcher_floor_{tag}_on_demand", context=context)
-    nodes = wait_for(lambda: launcher_nodes(node), 30.0, f"the launcher's node ({LAUNCHER_NODE}*)")
-    followers_wanted = wait_for(lambda: clock_followers(node), 30.0, "a process on /clock")
+
+    def graph() -> tuple[Any, ...]:
+        nodes = launcher_nodes(node)
+        subscriptions = [[(topic, cls.__name__, str(qos.reliability), str(qos.durability))
+                          for topic, cls, qos in subscriptions_of(node, *pair)] for pair in nodes]
+        return (tuple(nodes), repr(subscriptions), clock_followers(node)) if nodes else ()
+
+    nodes, _, followers_wanted = settled(graph, 60.0, f"the launcher's node ({LAUNCHER_NODE}*)")
     taken = 0
     for i, (name, namespace) in enumerate(nodes):
         target = node if i == 0 else on_demand  # the launcher spins its own node only
